@@ -30,7 +30,7 @@ from .arguments import check_time_option
 from .kb import KnowledgeBase
 from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
-from .store import refuse_no_store, shown_location
+from .store import refuse_memory_store, refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
 
 __all__ = ["main", "parse_event_line", "ingest_file", "IngestReport", "strip_full_stop"]
@@ -238,7 +238,19 @@ def _open(db: str, create: bool = True) -> KnowledgeBaseAPI:
         token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
         return slr_sql.connect(db, token=token)
     _check_existing_store(db, create)
+    if create:
+        refuse_memory_store(db, _command_name())
     return slr_sql.open(db)
+
+
+def _command_name() -> str:
+    """``slr add``, ``slr fleet push``: the command running, as a person types it."""
+    ctx = click.get_current_context(silent=True)
+    names = []
+    while ctx is not None and ctx.parent is not None:
+        names.append(ctx.info_name or "")
+        ctx = ctx.parent
+    return " ".join(["slr", *reversed(names)])
 
 
 def _check_existing_store(db: str, create: bool = False) -> None:
@@ -293,6 +305,8 @@ def demo(db_path: str | None) -> None:
 
     from .demo import run_demo
 
+    if db_path is not None:
+        refuse_memory_store(db_path, "slr demo --db")
     if db_path is not None and os.path.exists(db_path) and os.path.getsize(db_path) > 0:
         raise click.UsageError(f"{db_path} exists; the demo wants a fresh store (remove it first)")
     run_demo(Console(highlight=False), db_path=db_path)
@@ -690,6 +704,8 @@ def run(file: str, db: str | None, quiet: bool) -> None:
     example = parse_example(text, file)
     if db is not None and os.path.exists(db) and os.path.getsize(db) > 0:
         raise slr_sql.SLRError(f"{shown_location(db)} exists; slr run wants a fresh store (remove it first)")
+    if db is not None:
+        refuse_memory_store(db, "slr run --db")
     # The events are a recording: time stands still at 0, so no buffer prunes them and
     # every query sees the file's events however long ago their times are.
     with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
@@ -1111,9 +1127,15 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     JSON array of row objects (one row a line), ``nl`` one JSON object a line, ``csv`` and
     ``tsv`` with a header line, ``table`` a box table for reading.
 
+    JSON has no infinity nor NaN: ``json`` and ``nl`` write such a float as the service's
+    encoding does (``{"$float": "inf"}``, ``"-inf"``, ``"nan"``; what ``slr query --json`` and
+    ``POST /sql`` write), never the ``Infinity`` a JSON reader refuses.
+
     >>> write_rows(["n", "name"], [(1, "cup1"), (2, None)], "nl")
     {"n": 1, "name": "cup1"}
     {"n": 2, "name": null}
+    >>> write_rows(["x"], [(float("-inf"),)], "json")
+    [{"x": {"$float": "-inf"}}]
     """
     import csv
 
@@ -1121,6 +1143,8 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     if fmt in ("json", "nl"):
         from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
 
+        rows = (row if all(type(v) is not float or math.isfinite(v) for v in row)
+                else tuple(_json_float(v) for v in row) for row in rows)
         for line in output_rows(rows, columns, nl=fmt == "nl", arrays=False, json_cols=False):
             out.write(line + "\n")
     elif fmt in ("csv", "tsv"):
@@ -1140,6 +1164,13 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
         # Into a pipe the table is not cut to the terminal's width.
         Console(file=out, highlight=False, markup=False,
                 width=None if out.isatty() else 500).print(table)
+
+
+def _json_float(value: Any) -> Any:
+    """``value``, a non-finite float as ``{"$float": "inf" | "-inf" | "nan"}``."""
+    if type(value) is float and not math.isfinite(value):
+        return {"$float": "nan" if value != value else ("inf" if value > 0 else "-inf")}
+    return value
 
 
 @main.command()

@@ -13,7 +13,9 @@ The pusher only reads the robot's store (a WAL reader never blocks a writer): th
 own adds never wait for the fleet. With ``follow`` it keeps shipping as events arrive,
 woken by the robot store's change counter (``PRAGMA data_version``, read with a backoff
 while nothing changes), and while the fleet cannot be reached it retries with backoff and
-says so once per outage.
+says so once per outage; a refusal that waiting does not change (a bad token, a robot
+token that may not ship as this robot, a shipment the fleet never takes) stops it with
+:class:`FleetRefused`.
 """
 from __future__ import annotations
 
@@ -26,9 +28,10 @@ from typing import Any, Protocol, TypeVar
 
 from .errors import SLRError
 from .printable import printable_name, printable_text
-from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store, shown_location
+from .store import EventStore, WriterInFlight, check_robot_name, refuse_memory_store, refuse_no_store, \
+    shown_location
 
-__all__ = ["FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
+__all__ = ["FleetRefused", "FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
            "push", "status"]
 
 BATCH = 5000                 # rows per batch (one fleet transaction)
@@ -491,7 +494,8 @@ def push(db: str, fleet: str, *, robot: str | None = None,
     serve`), each event once. ``robot``: the name to ship as (default: the store's name;
     a store without one needs it, and is named so by the push); ``types``: only these event types (``"seen/2"``);
     ``follow``: keep shipping as events arrive until ``stop`` is set (retrying with backoff
-    while the fleet is unreachable, ``say`` telling once per outage); ``batch``: rows per
+    while the fleet is unreachable, ``say`` telling once per outage; a refusal that waiting
+    does not change raises :class:`FleetRefused`); ``batch``: rows per
     fleet transaction; ``resync``: ship every type again from its first row, the fleet
     skipping the rows it holds identically (after the robot's store was restored from an
     older backup, which a push otherwise refuses with :class:`RobotStoreRestored`).
@@ -618,6 +622,66 @@ def _may_pass(exc: BaseException) -> bool:
     return isinstance(status, int) and (status == 0 or status >= 500 or status == 408)
 
 
+# statuses of a fleet's answer that waiting does not change, though they are 4xx: a timeout,
+# a store restored behind the pusher (409: it asks the positions again), a rate limit
+RETRIED_4XX = (408, 409, 429)
+
+
+def _refused_for_good(exc: BaseException) -> bool:
+    """Whether the fleet refused a request in a way no retry of this pusher changes: over
+    ``slr serve`` an answer 4xx but 408, 409 and 429 (a bad token 401, a robot token that
+    may not ship as this robot 403, an unknown endpoint 404, a shipment the fleet will not
+    take 400, a body beyond its limit 413); from a fleet store opened here, the refusals
+    that are a 400 over ``slr serve`` (the robot's own store, a shipment conflict, a robot
+    reaching the fleet by two routes).
+
+    >>> from slr_sql.service.errors import ServiceError, ServiceUnavailable
+    >>> [_refused_for_good(ServiceError("x", kind=k)) for k in ("Unauthorized", "Conflict")]
+    [True, False]
+    >>> _refused_for_good(ServiceUnavailable("down", status=0)), _refused_for_good(OSError())
+    (False, False)
+    """
+    from .shipping import ShipmentRefused
+    from .store.fleet import RouteConflict, ShipmentConflict
+    if isinstance(exc, (ShipmentRefused, ShipmentConflict, RouteConflict)):
+        return True
+    status = getattr(exc, "status", None)
+    return isinstance(exc, SLRError) and isinstance(status, int) \
+        and 400 <= status < 500 and status not in RETRIED_4XX
+
+
+class FleetRefused(SLRError):
+    """A following pusher (``push(..., follow=True)``, ``slr fleet push --follow``) stopped:
+    the fleet refused it in a way waiting does not change (see ``docs/fleet.md``). The
+    message names the fleet, the HTTP status when it came over ``slr serve``, and the
+    fleet's reason; ``status`` is that status (None from a fleet store opened in the
+    pusher), ``__cause__`` the fleet's error.
+
+    >>> FleetRefused("fleet F refused ...", status=401).status
+    401
+    """
+
+    def __init__(self, message: str, status: int | None = None):
+        super().__init__(message)
+        self.status = status
+
+
+def _refusal(fleet: str, exc: BaseException) -> FleetRefused:
+    """The FleetRefused a following pusher stops with on the refusal ``exc``.
+
+    >>> from slr_sql.service.errors import ServiceForbidden
+    >>> str(_refusal("http://f", ServiceForbidden("the token of robot 'r1' ships as 'r1' only")))
+    "fleet http://f refused the push for good (HTTP 403 Forbidden: the token of robot 'r1' ships as 'r1' only); the push stopped, nothing more is shipped until it is started again"
+    """
+    reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    status = getattr(exc, "status", None)
+    status = status if isinstance(status, int) and 400 <= status < 500 else None
+    kind = getattr(exc, "kind", None)
+    said = f"HTTP {status} {kind}: {reason}" if status is not None and kind else reason
+    return FleetRefused(f"fleet {fleet} refused the push for good ({said}); the push stopped, "
+                        "nothing more is shipped until it is started again", status)
+
+
 def _retry_wait(exc: BaseException, backoff: float) -> float:
     """Seconds to wait after a failed request to the fleet before the next: the backoff, or
     the wait the failure asks for when longer (an SLRUnavailable's ``retry_after``: what the
@@ -676,6 +740,8 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
             continue
         except (SLRError, OSError) as exc:  # unreachable, busy, refused: try again later
             pusher.drop()
+            if _refused_for_good(exc):   # (waiting would only hide it from whoever runs us)
+                raise _refusal(printable_name(shown_location(pusher.fleet_name)), exc) from exc
             pusher.unreachable(exc)
             stop.wait(_retry_wait(exc, retry))
             retry = min(retry * 2, RETRY_MAX)
@@ -763,6 +829,7 @@ def click_group() -> Any:
     def name_command(db: str, robot: str) -> None:
         """Name the robot the store DB belongs to (kept in the store; once for life). Its
         events from now on carry the name; ``slr_sql.open(DB, robot=NAME)`` does the same."""
+        refuse_memory_store(db, "slr fleet name")
         with EventStore(db, robot=robot):
             pass
         click.echo(f"{printable_name(shown_location(db))} is the store of robot {printable_name(robot)}")
@@ -789,6 +856,7 @@ def click_group() -> Any:
         import signal
 
         refuse_no_store(db)
+        refuse_memory_store(fleet, "slr fleet push")
         stop = threading.Event()
         if follow:
             def on_signal(signum: int, frame: Any) -> None:

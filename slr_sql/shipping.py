@@ -22,7 +22,8 @@ from .host import Host
 from .store import check_robot_name
 from .store.checks import shown, text_problem
 
-__all__ = ["FLEET_MARK", "FleetBehind", "names_a_type", "positions", "prepare", "receive"]
+__all__ = ["FLEET_MARK", "FleetBehind", "ShipmentRefused", "names_a_type", "positions", "prepare",
+           "receive"]
 
 _JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
@@ -35,6 +36,17 @@ class FleetBehind(SLRError):
     the positions again and ships from there (``slr serve`` answers it 409 Conflict).
 
     >>> issubclass(FleetBehind, SLRError)
+    True
+    """
+
+
+class ShipmentRefused(SLRError):
+    """A fleet store refuses every shipment of this robot, whatever it brings: it is the
+    robot's own store (pushed into itself, or served and pushed to). Sending it again
+    changes nothing (a following pusher stops, see :mod:`slr_sql.fleet`); over ``slr
+    serve`` it is a 400.
+
+    >>> issubclass(ShipmentRefused, SLRError)
     True
     """
 
@@ -97,7 +109,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
         # the robot's own store (pushed into itself, or served and pushed to over the
         # service), or another store shipping under this store's name: each event would be
         # stored a second time
-        raise SLRError(f"this fleet store is the store of robot {robot!r} itself: a robot "
+        raise ShipmentRefused(f"this fleet store is the store of robot {robot!r} itself: a robot "
                        "does not ship to its own store (name the fleet store otherwise, or "
                        "leave it unnamed)")
     kb.loader.refresh()

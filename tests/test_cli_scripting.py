@@ -191,3 +191,38 @@ def test_ingest_shows_a_bar_on_a_terminal_for_a_long_file(store, tmp_path):
     child.expect(pexpect.EOF)
     child.close()
     assert child.exitstatus == 0
+
+
+def strict_json(text: str):
+    """``text`` read as JSON proper: ``Infinity``, ``-Infinity`` and ``NaN`` are refused."""
+    def refuse(constant: str):
+        raise AssertionError(f"{constant} is not JSON: {text}")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_sql_json_and_nl_write_infinities_and_nan_as_json(backend):
+    """JSON has no infinity nor NaN: a store's infinite values (SQLite keeps event arguments
+    as REAL; PostgreSQL gives float8 values, NaN too, which SQLite makes NULL) come out as
+    the service's encoding writes them."""
+    import slr_sql
+
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(100)) as kb:
+        kb.add_event("v", [float("inf")], 1.0)
+        kb.add_event("v", [float("-inf")], 2.0)
+        kb.add_event("v", [1.5], 3.0)
+    if backend.startswith("postgresql"):
+        select = ("SELECT x, 'NaN'::float8 AS n FROM (VALUES ('Infinity'::float8, 1), "
+                  "('-Infinity'::float8, 2), (1.5::float8, 3)) AS t(x, k) ORDER BY k")
+        nan = {"$float": "nan"}
+    else:
+        select = "SELECT arg1 AS x, NULL AS n FROM v ORDER BY t_end"
+        nan = None
+    whole = strict_json(slr("sql", backend, select, "--json").stdout)
+    lines = [strict_json(line) for line in slr("sql", backend, select, "--nl").stdout.splitlines()]
+    assert whole == lines
+    assert [row["x"] for row in lines] == [{"$float": "inf"}, {"$float": "-inf"}, 1.5]
+    assert [row["n"] for row in lines] == [nan] * 3
+    # what slr query --json writes of the stored values
+    answers = [strict_json(line)["X"] for line in
+               slr("query", backend, "v(X)^T", "--json").stdout.splitlines()]
+    assert answers == [{"$float": "inf"}, {"$float": "-inf"}, 1.5]

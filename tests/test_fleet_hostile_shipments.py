@@ -249,26 +249,19 @@ def test_a_fleet_store_replaced_behind_a_following_pusher_gets_every_event(tmp_p
             f"p{i}" for i in range(15))
 
 
-def test_a_following_pusher_says_the_fleet_refused_not_that_it_is_unreachable(tmp_path):
-    """A fleet that answers no (here: the served store is the robot's own) is not an outage:
-    the pusher keeps trying, but it says what the fleet answered."""
-    import threading
-    import time
-
+def test_a_following_pusher_stops_at_a_fleet_that_refuses_it_for_good(tmp_path):
+    """A fleet that answers no to every shipment (here: the served store is the robot's own,
+    a 400) is not an outage, and waiting does not change it: the pusher stops with the
+    fleet's reason (tests/test_fleet_follow_refused.py: the command line, other statuses)."""
     db = tmp_path / "r1.db"
     robot_store(db)
     said: list[str] = []
-    stop = threading.Event()
     with ServiceProcess(db) as served:
-        pusher = threading.Thread(target=fleet.push, args=(str(db), served.url),
-                                  kwargs={"follow": True, "stop": stop, "say": said.append})
-        pusher.start()
-        deadline = time.monotonic() + 60
-        while not said and time.monotonic() < deadline:
-            stop.wait(0.02)
-        stop.set()
-        pusher.join()
-    assert said and "refused the shipment" in said[0] and "itself" in said[0], said
+        with pytest.raises(fleet.FleetRefused) as refused:
+            fleet.push(str(db), served.url, follow=True, say=said.append)
+    assert refused.value.status == 400
+    assert "refused the push for good" in str(refused.value), refused.value
+    assert "itself" in str(refused.value), refused.value
     assert not any("unreachable" in line for line in said), said
     assert seen_rows(db) == 2
 

@@ -202,6 +202,10 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     except ImportError as exc:
         raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
                                f"pip install 'slr_sql[service]'") from None
+    if foxglove is not None and db == ":memory:":
+        # (the view reads the store through a connection of its own: a second store in memory)
+        raise slr_sql.SLRError("slr serve --foxglove needs the store's file: a store in memory "
+                               "(':memory:') is seen by the server's own connection only")
     limits = limits or Limits()
     sock = listen_on(host, port)
     try:

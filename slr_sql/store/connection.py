@@ -50,7 +50,7 @@ from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_s
 from .sqltext import file_identity as _file_identity, file_uri as _file_uri
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
-           "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout", "is_postgres_url"]
+           "run_sql_file", "check_file", "refuse_memory_store", "refuse_no_store", "check_busy_timeout", "is_postgres_url"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...; a condition of the file
@@ -483,6 +483,49 @@ def password_token(where: str) -> str:
     return "" if span is None else where[span[0]:span[1]]
 
 
+def on_read_only_file_system(path: str) -> bool:
+    """Whether the file system holding ``path`` is mounted read-only (a store there can be
+    read only; SQLite cannot make the ``-shm`` file of a store in WAL mode beside it).
+
+    >>> import tempfile; on_read_only_file_system(tempfile.gettempdir() + "/robot.db")
+    False
+    """
+    try:
+        flags = os.statvfs(os.path.dirname(os.path.abspath(path)) or ".").f_flag
+    except OSError:
+        return False
+    return bool(flags & os.ST_RDONLY)
+
+
+def read_only_uri(path: str) -> str:
+    """The URI that reads the store ``path`` on a file system mounted read-only: no process
+    writes to it there, so without a ``-wal`` (every commit in the file) it is read as
+    ``immutable`` (SQLite needs no ``-shm`` then); with one, as a read-only WAL database
+    (SQLite reads the ``-wal`` and ``-shm`` that exist).
+
+    >>> read_only_uri("/media/ro/robot.db")
+    'file:///media/ro/robot.db?mode=ro&immutable=1'
+    """
+    return _file_uri(path, "ro") + ("" if os.path.exists(path + "-wal") else "&immutable=1")
+
+
+def refuse_memory_store(path: str | None, command: str) -> None:
+    """Refuse ``":memory:"`` as the store of ``command`` (``slr add``, ...), which writes to
+    it: a store in memory would start empty and vanish with what was written when the
+    command exits (an API call, ``slr_sql.open(":memory:")``, keeps it while it runs).
+
+    >>> refuse_memory_store("robot.db", "slr add")
+    >>> refuse_memory_store(":memory:", "slr add")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: slr add: ':memory:' is a store in memory, which would start empty and vanish with what slr add writes when it exits; give the store's file (or a PostgreSQL URL)
+    """
+    if path == ":memory:":
+        raise SLRError(f"{command}: ':memory:' is a store in memory, which would start empty "
+                       f"and vanish with what {command} writes when it exits; give the "
+                       "store's file (or a PostgreSQL URL)")
+
+
 def refuse_no_store(path: str) -> None:
     """Refuse, before a command that only reads opens it (which would create it), a store
     path that holds no store: a missing path, or an empty file (SQLite would make it a
@@ -497,6 +540,10 @@ def refuse_no_store(path: str) -> None:
     if is_postgres_url(path):
         return
     _refuse_url_shaped(path)
+    if path == ":memory:" and not os.path.lexists(path):
+        raise SLRError("no such store: ':memory:' is a store in memory, which a command of its "
+                       "own would open empty; give the store's file (or the URL of the slr "
+                       "serve that holds a store in memory)")
     if not os.path.lexists(path):
         raise SLRError(f"no such store: {path}")
     if os.path.isfile(path) and os.path.getsize(path) == 0:
@@ -587,7 +634,12 @@ class Database:
             # (a URI of the path, as every other connection of the store opens it: SQLite,
             # built to read URIs, took a plain 'file:other.db' for the file other.db, which
             # check_file had not looked at and the store's readers did not open)
+            # (a store on a file system mounted read-only is opened to be read: SQLite
+            # could not make its -shm beside it, so reading failed too)
+            self.read_only = self.path is not None and not new and \
+                on_read_only_file_system(self.path)
             self.conn = sqlite3.connect(":memory:" if self.path is None else
+                                        read_only_uri(self.path) if self.read_only else
                                         _file_uri(self.path, "rwc"), uri=True,
                                         check_same_thread=False, isolation_level=None,
                                         timeout=busy_timeout, cached_statements=512)
@@ -617,10 +669,11 @@ class Database:
                 migrate(conn, self.path)
             # an existing store is in WAL already (switching again would want a lock); an
             # adopted file is switched only once its migrations succeeded
-            if self.path is not None and not new and \
+            if self.path is not None and not new and not self.read_only and \
                     conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
                 conn.execute("PRAGMA journal_mode=WAL")
-            background = checkpoint == "background" and self.path is not None
+            background = checkpoint == "background" and self.path is not None \
+                and not self.read_only
             if background:
                 # see store/checkpointer.py: no commit waits for a checkpoint's fsync
                 conn.execute("PRAGMA wal_autocheckpoint=0")
@@ -639,6 +692,16 @@ class Database:
                 reason = store_error(exc, self.path, busy_timeout, outcome)
                 if type(reason) is not SLRError:  # busy, full: a condition that may pass
                     raise reason from None
+                folder = os.path.dirname(os.path.abspath(self.path or ".")) or "."
+                if self.path is not None and not new and not getattr(self, "read_only", False) \
+                        and not os.access(folder, os.W_OK) and not os.access(self.path, os.W_OK):
+                    # (SQLite reads a store in WAL mode through a -shm file beside it, which it
+                    # makes when missing; a read-only file system is read without one)
+                    raise SLRError(
+                        f"{self.path}: cannot open the store: it is read-only to this process, "
+                        f"and so is its folder, where SQLite makes the -shm file it reads a "
+                        f"store through ({exc}); make the folder writable for this process, or "
+                        f"read a copy of the store") from None
                 raise SLRError(f"{self.path or ':memory:'}: cannot open the store "
                                f"({exc})") from None
             raise
@@ -1846,7 +1909,8 @@ class ReadConnection:
         self._identity = identity or _file_identity(path)
         try:
             # mode=rw: a store file deleted meanwhile is not made again, empty, at its path
-            self.conn = sqlite3.connect(_file_uri(path, "rw"), uri=True,
+            self.conn = sqlite3.connect(read_only_uri(path) if on_read_only_file_system(path)
+                                        else _file_uri(path, "rw"), uri=True,
                                         check_same_thread=False, isolation_level=None,
                                         timeout=busy_timeout, cached_statements=64)
         except sqlite3.Error as exc:

@@ -99,6 +99,8 @@ def store_error(exc: BaseException, path: str | None, timeout: float | None = No
 
     >>> print(store_error(sqlite3.OperationalError("database or disk is full"), "robot.db"))
     robot.db: the disk is full (or the store reached its size limit; database or disk is full); nothing of this call was written: free space and retry
+    >>> print(store_error(sqlite3.OperationalError("attempt to write a readonly database"), "robot.db"))
+    robot.db: the store is read-only (attempt to write a readonly database: the file, its folder or its file system may not be written by this process); nothing of this call was written: it can be read, not changed
     >>> print(store_error(sqlite3.OperationalError("datatype mismatch"), "robot.db"))
     robot.db: the store failed (datatype mismatch)
     """
@@ -115,6 +117,11 @@ def store_error(exc: BaseException, path: str | None, timeout: float | None = No
     if code in (sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_NOTADB):
         return naming_the_store(SLRError(f"{where}: the file is damaged ({text}); restore it "
                                          f"from a copy"), where, failure=True)
+    if code == sqlite3.SQLITE_READONLY or (code is None and "readonly database" in text):
+        return naming_the_store(SLRError(f"{where}: the store is read-only ({text}: the file, "
+                                         f"its folder or its file system may not be written "
+                                         f"by this process); {outcome}: it can be read, "
+                                         f"not changed"), where)
     if code == sqlite3.SQLITE_IOERR:
         return naming_the_store(SLRError(f"{where}: the disk failed to read or write the "
                                          f"store ({text})"), where, failure=True)
