@@ -55,7 +55,7 @@ def resident_bytes() -> int | None:
 
 
 # choicepoint kinds
-K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH, K_REACTIVATE = range(7)
+K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH, K_REACTIVATE, K_OUTPUT = range(8)
 
 
 class PrologThrow(Exception):
@@ -75,7 +75,7 @@ class Special:
         self.data = data
 
 
-S_CUT_TO, S_SOFTCUT, S_NAFAIL, S_COLLECT, S_POPCATCH, S_RULES = range(6)
+S_CUT_TO, S_SOFTCUT, S_NAFAIL, S_COLLECT, S_POPCATCH, S_RULES, S_OUTPUT_DONE = range(7)
 
 
 class Engine:
@@ -114,7 +114,7 @@ CONTROL = {
     ("call", 1), ("call", 2), ("call", 3), ("call", 4), ("call", 5), ("call", 6), ("call", 7),
     ("call", 8), ("findall", 3), ("findall", 4), ("findAll", 3), ("forall", 2),
     ("aggregate_all", 3), ("bagof", 3), ("setof", 3), ("catch", 3), ("throw", 1),
-    ("fail", 0), ("false", 0), ("^", 2), ("not", 1),
+    ("fail", 0), ("false", 0), ("^", 2), ("not", 1), ("with_output_to", 2),
 }
 
 
@@ -151,6 +151,9 @@ class Machine:
         # the bodies check_body walked (\+ \+ ... nested N deep walked each nested body
         # again, N²/2 steps)
         self._bodies = CheckedBodies()
+        # with_output_to/2's captures, innermost last: (height, choicepoint), each live while
+        # its choicepoint is still on the stack at that height (builtins.current_output)
+        self.captures: list = []
 
     # -- helpers used by builtins -------------------------------------------------------
     def unify(self, a: Any, b: Any) -> bool:
@@ -353,7 +356,7 @@ class Machine:
                 # backtracking into a catch/3 goal that had exited: the catch is active again
                 cps.pop()
                 cp[3][0] = K_CATCH
-            else:  # K_DEAD, K_CATCH: nothing to resume
+            else:  # K_DEAD, K_CATCH, K_OUTPUT: nothing to resume
                 cps.pop()
         return False
 
@@ -534,6 +537,10 @@ class Machine:
             # (raised inside the catch: catch/3 catches it)
             self.meta_check(args[0], _SYSTEM_CATCH)
             return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
+        if name == "with_output_to":
+            from .builtins import start_output_capture
+
+            return start_output_capture(self, args, cb, nxt)
         # collection predicates
         from .builtins import collector
 
@@ -557,6 +564,10 @@ class Machine:
             if each is not None:
                 each(found)
             return False
+        if op == S_OUTPUT_DONE:
+            from .builtins import end_output_capture
+
+            return end_output_capture(self, goal.data, nxt)
         if op == S_RULES:
             pred, args = goal.data
             return self._call_pred(pred, args, nxt)
