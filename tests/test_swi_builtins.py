@@ -1534,3 +1534,68 @@ def test_a_raw_newline_inside_quotes_reads_as_in_swipl(swipl, goal):
     _, _, swi, queries = swidiff.builtin_example(goal)
     example = (RAW_NEWLINE_PROGRAM, [], RAW_NEWLINE_PROGRAM + swi, queries)
     assert swidiff.check_example(example, swipl.run(example[2])) is not swidiff.DISCARDED
+
+
+# What slr_sql does not support of SWI-Prolog (docs/language.md, "Not supported"): each an
+# error that names it, never an answer SWI-Prolog would not give
+NOT_SUPPORTED = {
+    "assert(f(1))": "existence_error(procedure,assert/1)",
+    "asserta(f(1))": "existence_error(procedure,asserta/1)",
+    "assertz(f(1))": "existence_error(procedure,assertz/1)",
+    "retract(f(1))": "existence_error(procedure,retract/1)",
+    "nb_setval(k, 1)": "existence_error(procedure,nb_setval/2)",
+    "b_setval(k, 1)": "existence_error(procedure,b_setval/2)",
+    "nb_getval(k, V)": "existence_error(procedure,nb_getval/2)",
+    "op(700, xfx, ===)": "existence_error(procedure,op/3)",
+    "current_op(P, T, is)": "existence_error(procedure,current_op/3)",
+    "setup_call_cleanup(true, true, true)": "existence_error(procedure,setup_call_cleanup/3)",
+    "call_cleanup(true, true)": "existence_error(procedure,call_cleanup/2)",
+    "print_message(error, x)": "existence_error(procedure,print_message/2)",
+    "portray_clause(x)": "existence_error(procedure,portray_clause/1)",
+    "write_term(x, [])": "existence_error(procedure,write_term/2)",
+    "write_term(user_output, x, [])": "existence_error(procedure,write_term/3)",
+    "read(X)": "existence_error(procedure,read/1)",
+    "read_term(X, [])": "existence_error(procedure,read_term/2)",
+    "get_char(C)": "existence_error(procedure,get_char/1)",
+    "read_term_from_atom(a, T, [])": "existence_error(procedure,read_term_from_atom/3)",
+    "text_to_string(a, S)": "existence_error(procedure,text_to_string/2)",
+    "aggregate(count, true, C)": "existence_error(procedure,aggregate/3)",
+    "list_to_assoc([], A)": "existence_error(procedure,list_to_assoc/2)",
+    "apply(true, [])": "existence_error(procedure,apply/2)",
+    "X is 5 rdiv 2": "type_error(evaluable,(rdiv)/2)",
+    "X is rational(0.5)": "type_error(evaluable,rational/1)",
+    "X is rationalize(0.5)": "type_error(evaluable,rationalize/1)",
+    "X is lcm(4, 6)": "type_error(evaluable,lcm/2)",
+    "maplist(\\X^true, [1])": "existence_error(procedure,(\\)/2)",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(NOT_SUPPORTED))
+def test_what_is_not_supported_is_an_error_naming_it(goal):
+    import re
+    from pathlib import Path
+
+    import slr_sql
+    from slr_sql.errors import SLREvaluationError
+
+    with slr_sql.open(clock=slr_sql.ManualClock(0)) as kb:
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            with pytest.raises(SLREvaluationError) as raised:
+                kb.query(goal)
+            assert str(raised.value.term.args[0]) == NOT_SUPPORTED[goal]
+    # and the page of the builtins lists it
+    name_arity = re.search(r",\(?(.+?)\)?/(\d)\)$", NOT_SUPPORTED[goal])
+    page = (Path(__file__).parent.parent / "docs" / "language.md").read_text(encoding="utf-8")
+    section = page[page.index("### Not supported"):page.index("## The robot library")]
+    name, arity = name_arity.group(1), name_arity.group(2)
+    assert re.search(rf"`\(?{re.escape(name)}\)?/[0-9,]*{arity}", section), (name, arity)
+
+
+@pytest.mark.parametrize("text", ["X = 1r3", "X = `abc`"])
+def test_unsupported_syntax_says_what_it_is(text):
+    import slr_sql
+
+    with slr_sql.open(clock=slr_sql.ManualClock(0)) as kb, \
+            pytest.raises(slr_sql.SLRSyntaxError, match="not supported"):
+        kb.query(text)
