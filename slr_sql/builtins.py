@@ -2202,12 +2202,15 @@ class _Capture:
     """with_output_to/2's text so far (bounded as format/2's output is), or a stream alias
     its goal's output goes to (``with_output_to(user_error, G)``)."""
 
-    __slots__ = ("parts", "size", "stream")
+    __slots__ = ("parts", "size", "stream", "position")
 
     def __init__(self, stream: Any = None):
         self.parts: list[str] = []
         self.size = 0
         self.stream = stream
+        # where the text's last line ends, as SWI-Prolog's stream counts it: format/2's
+        # column stops count from there (write(a), format("~t~w~10|", [b]) pads to 10)
+        self.position = 0
 
     def write(self, text: str) -> None:
         if self.stream is not None:
@@ -2217,6 +2220,7 @@ class _Capture:
         if self.size > MAX_BUILT_TEXT:
             raise resource_error("memory")
         self.parts.append(text)
+        self.position = _line_position(text, self.position)
 
 
 # the text sinks of with_output_to/2 and format/3 (SWI-Prolog's)
@@ -2272,13 +2276,15 @@ def _unify_sink(m: "Machine", sink: Struct, text: str) -> bool:
 _WITH_OUTPUT_TO = _pi("with_output_to", 2)
 
 
-def start_output_capture(m: "Machine", args: tuple, cb: int, nxt: Any):
-    """``with_output_to(Sink, Goal)``: Goal run as once/1 with what it writes captured (or
-    sent to a stream alias), the sink checked first, as SWI-Prolog's. The capture is a
-    choicepoint, so it ends with its goal however the goal ends: a failure or an error
-    backtracks past it and the output goes where it went before."""
-    from .engine import K_OUTPUT, S_OUTPUT_DONE, Special
+def capture_sink(m: "Machine", args: tuple) -> Any:
+    """with_output_to(Sink, Goal)'s checks, as SWI-Prolog's, the sink's first: the text sink
+    term (``string(S)``, ...) or the stream an alias names (what the goal's output goes to);
+    the engine then runs the goal as once/1 with its output captured.
 
+    >>> from slr_sql.engine import Engine
+    >>> capture_sink(Engine(Program()).machine(), (Struct("string", (Var("S"),)), Atom("true"))).name
+    Atom('string')
+    """
     try:
         sink = _output_sink(m, args[0])
         goal = deref(args[1])
@@ -2291,22 +2297,31 @@ def start_output_capture(m: "Machine", args: tuple, cb: int, nxt: Any):
         raise with_context(exc, _WITH_OUTPUT_TO)
     # SWI-Prolog calls the goal from C: an undefined procedure names '$c_call_prolog'/0
     m.meta_check(goal, _pi("$c_call_prolog", 0))
-    height = len(m.cps)
-    capture = _Capture(None if type(sink) is Struct else sink)
-    cp = [K_OUTPUT, len(m.trail), None, capture, None, None]
-    m.cps.append(cp)
-    m.captures.append((height, cp))
-    return (goal, height + 1, (Special(S_OUTPUT_DONE, (height, cp, sink)), cb, nxt))
+    return sink
 
 
-def end_output_capture(m: "Machine", data: tuple, nxt: Any):
-    """with_output_to/2's goal succeeded: its other solutions cut (once/1), the capture
-    ended, and the sink unified with the text."""
-    height, cp, sink = data
-    del m.cps[height:]
+def output_capture(sink: Any) -> _Capture:
+    """The capture of with_output_to/2's goal: its text, for a text sink; for a stream alias
+    the stream it passes the text on to.
+
+    >>> c = output_capture(Struct("atom", (Var("A"),))); c.write("ab"); "".join(c.parts)
+    'ab'
+    """
+    return _Capture(None if type(sink) is Struct else sink)
+
+
+def unify_sink(m: "Machine", sink: Any, capture: _Capture) -> bool:
+    """with_output_to/2's goal succeeded: the text sink unified with what it wrote (true for
+    a stream alias, which has had its text).
+
+    >>> from slr_sql.engine import Engine
+    >>> m = Engine(Program()).machine(); s = Var("S"); c = output_capture(Struct("string", (s,)))
+    >>> c.write("hi"); unify_sink(m, Struct("string", (s,)), c), s.ref
+    (True, String('hi'))
+    """
     if type(sink) is not Struct:
-        return nxt
-    return nxt if _unify_sink(m, sink, "".join(cp[3].parts)) else False
+        return True
+    return _unify_sink(m, sink, "".join(capture.parts))
 
 
 def _write_text(t: Any, quoted: bool = False, deadline: float | None = None,
@@ -2333,7 +2348,7 @@ def canonical_text(t: Any, deadline: float | None = None) -> str:
     >>> canonical_text(Struct("f", (x, y, x, Struct("-", (1,)), Struct("$VAR", (1,)))))
     "f(A,_,A,-(1),'$VAR'(1))"
     """
-    from .terms import _numbervar_name, format_term
+    from .terms import format_term
 
     seen: dict[int, int] = {}
     order: list[int] = []
@@ -2349,7 +2364,8 @@ def canonical_text(t: Any, deadline: float | None = None) -> str:
     names: dict[int, str] = {}
     for key in order:
         if seen[key] > 1:
-            names[key] = _numbervar_name(len(names)) or "_"
+            n = len(names)   # A, ..., Z, A1, ... as numbervars/3 and write/1 name them
+            names[key] = chr(ord("A") + n % 26) + (str(n // 26) if n >= 26 else "")
     return format_term(t, quoted=True, deadline=deadline, var_names=lambda v: names.get(id(v), "_"),
                        cycle_names=False, ignore_ops=True)
 
@@ -2410,6 +2426,28 @@ DET[("tab", 1)] = _tab
 DET[("tab", 2)] = lambda m, a: (_stream_alias(m, a[0], sink=False).write(_spaces(a[1])), True)[1]
 
 
+def _text_to_string(m: "Machine", a: list) -> bool:
+    """text_to_string(Text, S): an atom, a string or a code or character list (no number)
+    as a string, as SWI-Prolog's: a string Text is unified with S as it is; else a given S
+    is compared as text (an atom, a string, a number, a code or character list, ``[]`` the
+    empty text; what is none of these is no match)."""
+    text = text_in(a[0], "no_number")
+    if type(deref(a[0])) is String:
+        return m.unify(a[1], a[0])
+    result = deref(a[1])
+    if type(result) is Var:
+        return m.unify(result, String(text))
+    if type(result) is Struct and not (result.name == CONS and len(result.args) == 2):
+        return False
+    try:
+        return text_in(result, "any") == text
+    except SLREvaluationError:
+        return False
+
+
+DET[("text_to_string", 2)] = _text_to_string
+
+
 def _numbervars(m: "Machine", a: list) -> bool:
     """numbervars(T, Start, End): each unbound variable of T, depth-first left to right,
     bound to ``'$VAR'(N)`` from N = Start (which write/1, print/1 and format/2 write as
@@ -2431,9 +2469,9 @@ def _numbervars(m: "Machine", a: list) -> bool:
 DET[("numbervars", 3)] = _numbervars
 
 
-def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
+def format_text(fmt: str, args: list, deadline: float | None = None, start: int = 0) -> str:
     """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~E ~f ~g ~G ~n ~c ~r ~R ~8| ~t
-    ~~ ~i ~*c.
+    ~~ ~i ~*c; ``start``: the column the output goes on from (its column stops count from it).
 
     >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
     'cup has 3 items\\n'
@@ -2443,6 +2481,7 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
     i = 0
     n = len(fmt)
     columns = _ColumnStops(out)
+    columns.column = columns.position = start
 
     def take():
         if not args:
@@ -2622,6 +2661,9 @@ class _ColumnStops:
         self.start = 0            # the piece where the text since the last stop begins
         self.column = 0           # the column it begins at (format's count)
         self.position = 0         # where the output ends on its line there (the stream's)
+        # the last stop, where ~N+ counts from: the line's start before the first (even when
+        # format/2 goes on from a column of the stream's)
+        self.last_stop = 0
         self.fills: list[tuple[int, str]] = []   # (piece, fill character) of each ~t
         self.terms: set[int] = set()             # the pieces ~w, ~p, ~q wrote
 
@@ -2662,7 +2704,7 @@ class _ColumnStops:
         if count is None:
             target = here
         else:
-            target = self.column + count if relative else count
+            target = self.last_stop + count if relative else count
         pad = target - here
         if pad > 0:
             if self.fills:
@@ -2674,6 +2716,7 @@ class _ColumnStops:
         # the column is the stop's even where the text went past it (SWI-Prolog counts on
         # from the stop: "abcdef~3|~t~a~10|" pads 'x' from column 3)
         self.start, self.column, self.fills = len(out), target, []
+        self.last_stop = target
         self.terms.clear()
 
 
@@ -2832,14 +2875,17 @@ def _format_args(t: Any) -> list:
 
 @det("format", 1)
 def _format1(m, a):
-    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), [], m.deadline))
+    out = _out(m)
+    out.write(format_text(text_in(a[0], "whole", numbers=False), [], m.deadline,
+                          getattr(out, "position", 0)))
     return True
 
 
 @det("format", 2)
 def _format2(m, a):
-    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), _format_args(a[1]),
-                              m.deadline))
+    out = _out(m)
+    out.write(format_text(text_in(a[0], "whole", numbers=False), _format_args(a[1]),
+                          m.deadline, getattr(out, "position", 0)))
     return True
 
 

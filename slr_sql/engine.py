@@ -538,9 +538,17 @@ class Machine:
             self.meta_check(args[0], _SYSTEM_CATCH)
             return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
         if name == "with_output_to":
-            from .builtins import start_output_capture
+            # the goal as once/1 with its output captured: the capture is a choicepoint, so
+            # it ends with its goal however the goal ends (a failure or an error backtracks
+            # past it, and the output goes where it went before)
+            from .builtins import capture_sink, output_capture
 
-            return start_output_capture(self, args, cb, nxt)
+            sink = capture_sink(self, args)
+            height = len(cps)
+            cp = [K_OUTPUT, len(self.trail), None, output_capture(sink), None, None]
+            cps.append(cp)
+            self.captures.append((height, cp))
+            return (args[1], height + 1, (Special(S_OUTPUT_DONE, (height, cp, sink)), cb, nxt))
         # collection predicates
         from .builtins import collector
 
@@ -565,9 +573,13 @@ class Machine:
                 each(found)
             return False
         if op == S_OUTPUT_DONE:
-            from .builtins import end_output_capture
+            # with_output_to/2's goal succeeded: its other solutions cut (once/1), the
+            # capture ended, the sink unified with the text
+            from .builtins import unify_sink
 
-            return end_output_capture(self, goal.data, nxt)
+            height, cp, sink = goal.data
+            del self.cps[height:]
+            return nxt if unify_sink(self, sink, cp[3]) else False
         if op == S_RULES:
             pred, args = goal.data
             return self._call_pred(pred, args, nxt)
