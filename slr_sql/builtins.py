@@ -75,7 +75,12 @@ def _pi(name: str, arity: int, module: str | None = "system") -> Any:
 
 _OTHER_CONTEXTS: dict[tuple[str, int], Any] = {
     ("length", 2): _pi("length", 2, None),
-    ("numbervars", 3): _pi("numbervars", 4),   # (SWI-Prolog's numbervars/3 calls /4)
+    ("$numbervars", 3): _pi("numbervars", 4),   # (SWI-Prolog's numbervars/3 calls /4)
+    ("$text_to_string", 2): _pi("text_to_string", 2),
+    ("$sformat", 3): _pi("sformat", 3), ("$sformat", 2): _pi("sformat", 2),
+    ("$nl_to", 1): _pi("nl", 1), ("$tab_to", 2): _pi("tab", 2),
+    **{(f"${name}_to", 2): _pi(name, 2)
+       for name in ("write", "print", "writeq", "write_canonical", "writeln")},
     ("$sub_string", 5): _pi("sub_string", 5),
     ("$char_type", 2): _pi("char_type", 2),
     ("$code_type", 2): _pi("code_type", 2),
@@ -2396,11 +2401,13 @@ def _writer(name: str, with_stream: bool) -> Callable[["Machine", list], bool]:
     return write
 
 
+# (the ones with a stream are the library's write/2, ... : a program written before slr_sql
+# had them keeps its own, as for the library's other predicates)
 for _name in _WRITERS:
     DET[(_name, 1)] = _writer(_name, False)
-    DET[(_name, 2)] = _writer(_name, True)
+    DET[(f"${_name}_to", 2)] = _writer(_name, True)
 DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
-DET[("nl", 1)] = lambda m, a: (_stream_alias(m, a[0], sink=False).write("\n"), True)[1]
+DET[("$nl_to", 1)] = lambda m, a: (_stream_alias(m, a[0], sink=False).write("\n"), True)[1]
 
 
 def _spaces(n: Any) -> str:
@@ -2423,7 +2430,7 @@ def _tab(m: "Machine", a: list) -> bool:
 
 
 DET[("tab", 1)] = _tab
-DET[("tab", 2)] = lambda m, a: (_stream_alias(m, a[0], sink=False).write(_spaces(a[1])), True)[1]
+DET[("$tab_to", 2)] = lambda m, a: (_stream_alias(m, a[0], sink=False).write(_spaces(a[1])), True)[1]
 
 
 def _text_to_string(m: "Machine", a: list) -> bool:
@@ -2445,7 +2452,7 @@ def _text_to_string(m: "Machine", a: list) -> bool:
         return False
 
 
-DET[("text_to_string", 2)] = _text_to_string
+DET[("$text_to_string", 2)] = _text_to_string
 
 
 def _numbervars(m: "Machine", a: list) -> bool:
@@ -2466,7 +2473,7 @@ def _numbervars(m: "Machine", a: list) -> bool:
     return m.unify(a[2], n)
 
 
-DET[("numbervars", 3)] = _numbervars
+DET[("$numbervars", 3)] = _numbervars
 
 
 def format_text(fmt: str, args: list, deadline: float | None = None, start: int = 0) -> str:
@@ -2907,8 +2914,8 @@ def _sformat(m: "Machine", a: list) -> bool:
     return m.unify(a[0], String(text))
 
 
-DET[("sformat", 3)] = _sformat
-DET[("sformat", 2)] = _sformat
+DET[("$sformat", 3)] = _sformat
+DET[("$sformat", 2)] = _sformat
 
 
 DET[("halt", 0)] = lambda m, a: (_ for _ in ()).throw(
@@ -3948,6 +3955,18 @@ min_member(P, M, L) :- throw(error(existence_error(matching_rule, lists:min_memb
 '$min_member3'([], _, M0, M) :- !, M = M0.
 '$min_member3'([H|T], P, M0, M) :- !, ( call(P, M0, H) -> '$min_member3'(T, P, M0, M) ; '$min_member3'(T, P, H, M) ).
 '$min_member3'(L, P, M0, M) :- throw(error(existence_error(matching_rule, lists:min_member_(L, user:P, M0, M)), context(lists:min_member_/4, _))).
+with_output_to(Sink, Goal) :- '$with_output_to'(Sink, Goal).
+write(S, T) :- '$write_to'(S, T).
+print(S, T) :- '$print_to'(S, T).
+writeq(S, T) :- '$writeq_to'(S, T).
+write_canonical(S, T) :- '$write_canonical_to'(S, T).
+writeln(S, T) :- '$writeln_to'(S, T).
+nl(S) :- '$nl_to'(S).
+tab(S, N) :- '$tab_to'(S, N).
+sformat(S, F, A) :- '$sformat'(S, F, A).
+sformat(S, F) :- '$sformat'(S, F).
+numbervars(T, S, E) :- '$numbervars'(T, S, E).
+text_to_string(T, S) :- '$text_to_string'(T, S).
 ord_del_element(Set, El, Del) :- '$ord_del_element'(Set, El, Del).
 '$ord_del_element'([], _, []).
 '$ord_del_element'([H|T], El, Del) :- compare(Order, H, El), '$ord_delel'(Order, H, T, El, Del).

@@ -114,7 +114,7 @@ CONTROL = {
     ("call", 1), ("call", 2), ("call", 3), ("call", 4), ("call", 5), ("call", 6), ("call", 7),
     ("call", 8), ("findall", 3), ("findall", 4), ("findAll", 3), ("forall", 2),
     ("aggregate_all", 3), ("bagof", 3), ("setof", 3), ("catch", 3), ("throw", 1),
-    ("fail", 0), ("false", 0), ("^", 2), ("not", 1), ("with_output_to", 2),
+    ("fail", 0), ("false", 0), ("^", 2), ("not", 1), ("$with_output_to", 2),
 }
 
 
@@ -537,7 +537,7 @@ class Machine:
             # (raised inside the catch: catch/3 catches it)
             self.meta_check(args[0], _SYSTEM_CATCH)
             return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
-        if name == "with_output_to":
+        if name == "$with_output_to":
             # the goal as once/1 with its output captured: the capture is a choicepoint, so
             # it ends with its goal however the goal ends (a failure or an error backtracks
             # past it, and the output goes where it went before)

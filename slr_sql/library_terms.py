@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = 'f450e5ef39faccfa9bccdba02396af722f0bae54d2531909572aa6d49eea86bb'
+SOURCE_SHA256 = '732641e9d08bd3895b07afaf4df761a3e5c3d4d83910d3530f72eb9618db355a'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -455,16 +455,40 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(S(A('$min_member3'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (A('!'), S(A(';'), (S(A('->'), (S(A('call'), (v[2], v[3], v[0])), S(A('$min_member3'), (v[1], v[2], v[3], v[4])))), S(A('$min_member3'), (v[1], v[2], v[0], v[4])))))), Span('<library>', 221, 1, 221, 118), (('H', v[0]), ('T', v[1]), ('P', v[2]), ('M0', v[3]), ('M', v[4]), ), source[16901:17018]))
     v = [Var('L'), Var('P'), Var('M0'), Var('M'), Var('_')]
     out.append(Clause(S(A('$min_member3'), (v[0], v[1], v[2], v[3])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('min_member_'), (v[0], S(A(':'), (A('user'), v[1])), v[2], v[3])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('min_member_'), 4)))), v[4])))),)), Span('<library>', 222, 1, 222, 147), (('L', v[0]), ('P', v[1]), ('M0', v[2]), ('M', v[3]), ), source[17019:17165]))
+    v = [Var('Sink'), Var('Goal')]
+    out.append(Clause(S(A('with_output_to'), (v[0], v[1])), S(A('$with_output_to'), (v[0], v[1])), Span('<library>', 223, 1, 223, 61), (('Sink', v[0]), ('Goal', v[1]), ), source[17166:17226]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('write'), (v[0], v[1])), S(A('$write_to'), (v[0], v[1])), Span('<library>', 224, 1, 224, 34), (('S', v[0]), ('T', v[1]), ), source[17227:17260]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('print'), (v[0], v[1])), S(A('$print_to'), (v[0], v[1])), Span('<library>', 225, 1, 225, 34), (('S', v[0]), ('T', v[1]), ), source[17261:17294]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('writeq'), (v[0], v[1])), S(A('$writeq_to'), (v[0], v[1])), Span('<library>', 226, 1, 226, 36), (('S', v[0]), ('T', v[1]), ), source[17295:17330]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('write_canonical'), (v[0], v[1])), S(A('$write_canonical_to'), (v[0], v[1])), Span('<library>', 227, 1, 227, 54), (('S', v[0]), ('T', v[1]), ), source[17331:17384]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('writeln'), (v[0], v[1])), S(A('$writeln_to'), (v[0], v[1])), Span('<library>', 228, 1, 228, 38), (('S', v[0]), ('T', v[1]), ), source[17385:17422]))
+    v = [Var('S')]
+    out.append(Clause(S(A('nl'), (v[0],)), S(A('$nl_to'), (v[0],)), Span('<library>', 229, 1, 229, 22), (('S', v[0]), ), source[17423:17444]))
+    v = [Var('S'), Var('N')]
+    out.append(Clause(S(A('tab'), (v[0], v[1])), S(A('$tab_to'), (v[0], v[1])), Span('<library>', 230, 1, 230, 30), (('S', v[0]), ('N', v[1]), ), source[17445:17474]))
+    v = [Var('S'), Var('F'), Var('A')]
+    out.append(Clause(S(A('sformat'), (v[0], v[1], v[2])), S(A('$sformat'), (v[0], v[1], v[2])), Span('<library>', 231, 1, 231, 41), (('S', v[0]), ('F', v[1]), ('A', v[2]), ), source[17475:17515]))
+    v = [Var('S'), Var('F')]
+    out.append(Clause(S(A('sformat'), (v[0], v[1])), S(A('$sformat'), (v[0], v[1])), Span('<library>', 232, 1, 232, 35), (('S', v[0]), ('F', v[1]), ), source[17516:17550]))
+    v = [Var('T'), Var('S'), Var('E')]
+    out.append(Clause(S(A('numbervars'), (v[0], v[1], v[2])), S(A('$numbervars'), (v[0], v[1], v[2])), Span('<library>', 233, 1, 233, 47), (('T', v[0]), ('S', v[1]), ('E', v[2]), ), source[17551:17597]))
+    v = [Var('T'), Var('S')]
+    out.append(Clause(S(A('text_to_string'), (v[0], v[1])), S(A('$text_to_string'), (v[0], v[1])), Span('<library>', 234, 1, 234, 49), (('T', v[0]), ('S', v[1]), ), source[17598:17646]))
     v = [Var('Set'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 223, 1, 223, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[17166:17232]))
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 235, 1, 235, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[17647:17713]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 224, 1, 224, 31), (), source[17233:17263]))
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 236, 1, 236, 31), (), source[17714:17744]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
-    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 225, 1, 225, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[17264:17360]))
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 237, 1, 237, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[17745:17841]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 226, 1, 226, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[17361:17432]))
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 238, 1, 238, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[17842:17913]))
     v = [Var('_'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 227, 1, 227, 31), (('T', v[1]), ), source[17433:17463]))
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 239, 1, 239, 31), (('T', v[1]), ), source[17914:17944]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 228, 1, 228, 35), (('H', v[0]), ('T', v[1]), ), source[17464:17498]))
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 240, 1, 240, 35), (('H', v[0]), ('T', v[1]), ), source[17945:17979]))
     return out
