@@ -2455,6 +2455,50 @@ def _text_to_string(m: "Machine", a: list) -> bool:
 DET[("$text_to_string", 2)] = _text_to_string
 
 
+_MESSAGE_PREFIXES = {"error": "ERROR: ", "warning": "Warning: ", "informational": "% "}
+
+
+def message_text(kind: Any, message: Any, deadline: float | None = None) -> str | None:
+    """The line print_message/2 writes to the standard error for a message of ``kind``
+    (None: nothing, for ``silent``): ``format(Format, Args)`` formatted, any other term as
+    SWI-Prolog writes a message it has no text for, after the kind's prefix.
+
+    >>> message_text(Atom("warning"), Struct("format", (String("~w late"), make_list([Atom("cup1")]))))
+    'Warning: cup1 late\\n'
+    >>> message_text(Atom("error"), Atom("oops")), message_text(Atom("silent"), Atom("x"))
+    ('ERROR: Unknown message: oops\\n', None)
+    """
+    kind = deref(kind)
+    if type(kind) is Var:
+        raise instantiation_error()
+    if type(kind) is Atom and kind == "silent":
+        return None
+    message = deref(message)
+    text = None
+    if type(message) is Struct and message.name == "format" and len(message.args) == 2:
+        try:
+            text = format_text(text_in(message.args[0], "whole", numbers=False),
+                               _format_args(message.args[1]), deadline)
+        except SLREvaluationError:
+            text = None
+    if text is None:
+        text = "Unknown message: " + _write_text(message, True, deadline)
+    prefix = _MESSAGE_PREFIXES.get(str(kind), "") if type(kind) is Atom else ""
+    return prefix + text + "\n"
+
+
+def _print_message(m: "Machine", a: list) -> bool:
+    """print_message(Kind, Message): its line to the standard error (never into a
+    with_output_to/2 capture), as SWI-Prolog's (:func:`message_text`)."""
+    text = message_text(a[0], a[1], m.deadline)
+    if text is not None:
+        sys.stderr.write(text)
+    return True
+
+
+DET[("$print_message", 2)] = _print_message
+
+
 def _numbervars(m: "Machine", a: list) -> bool:
     """numbervars(T, Start, End): each unbound variable of T, depth-first left to right,
     bound to ``'$VAR'(N)`` from N = Start (which write/1, print/1 and format/2 write as
@@ -3967,6 +4011,7 @@ sformat(S, F, A) :- '$sformat'(S, F, A).
 sformat(S, F) :- '$sformat'(S, F).
 numbervars(T, S, E) :- '$numbervars'(T, S, E).
 text_to_string(T, S) :- '$text_to_string'(T, S).
+print_message(Kind, Message) :- '$print_message'(Kind, Message).
 ord_del_element(Set, El, Del) :- '$ord_del_element'(Set, El, Del).
 '$ord_del_element'([], _, []).
 '$ord_del_element'([H|T], El, Del) :- compare(Order, H, El), '$ord_delel'(Order, H, T, El, Del).

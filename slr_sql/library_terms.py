@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = '732641e9d08bd3895b07afaf4df761a3e5c3d4d83910d3530f72eb9618db355a'
+SOURCE_SHA256 = '4804cfe93d16c4d0cb1f0b7553ff338bead3b038219516aa328fdbf6df839a43'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -479,16 +479,18 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(S(A('numbervars'), (v[0], v[1], v[2])), S(A('$numbervars'), (v[0], v[1], v[2])), Span('<library>', 233, 1, 233, 47), (('T', v[0]), ('S', v[1]), ('E', v[2]), ), source[17551:17597]))
     v = [Var('T'), Var('S')]
     out.append(Clause(S(A('text_to_string'), (v[0], v[1])), S(A('$text_to_string'), (v[0], v[1])), Span('<library>', 234, 1, 234, 49), (('T', v[0]), ('S', v[1]), ), source[17598:17646]))
+    v = [Var('Kind'), Var('Message')]
+    out.append(Clause(S(A('print_message'), (v[0], v[1])), S(A('$print_message'), (v[0], v[1])), Span('<library>', 235, 1, 235, 65), (('Kind', v[0]), ('Message', v[1]), ), source[17647:17711]))
     v = [Var('Set'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 235, 1, 235, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[17647:17713]))
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 236, 1, 236, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[17712:17778]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 236, 1, 236, 31), (), source[17714:17744]))
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 237, 1, 237, 31), (), source[17779:17809]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
-    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 237, 1, 237, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[17745:17841]))
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 238, 1, 238, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[17810:17906]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 238, 1, 238, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[17842:17913]))
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 239, 1, 239, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[17907:17978]))
     v = [Var('_'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 239, 1, 239, 31), (('T', v[1]), ), source[17914:17944]))
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 240, 1, 240, 31), (('T', v[1]), ), source[17979:18009]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 240, 1, 240, 35), (('H', v[0]), ('T', v[1]), ), source[17945:17979]))
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 241, 1, 241, 35), (('H', v[0]), ('T', v[1]), ), source[18010:18044]))
     return out
