@@ -1666,6 +1666,38 @@ def test_text_builtins_over_stored_values_answer_as_swipl_on_both_paths(swipl, b
 
 
 
+# Output into text and lambdas over stored values, on both backends and both paths (they run
+# in the interpreter, beside a compiled event goal): SWI-Prolog's answers for the same values
+STORED_OUTPUT_GOALS = {
+    "v(X)^_, with_output_to(string(S), print(X))": "member(X, VS), with_output_to(string(S), print(X))",
+    'v(X)^_, format(atom(A), "~q~t~w~20|", [X, X])': 'member(X, VS), format(atom(A), "~q~t~w~20|", [X, X])',
+    "findall(S, (v(X)^_, with_output_to(string(S), write_canonical(f(X, _, - X)))), L)":
+        "findall(S, (member(X, VS), with_output_to(string(S), write_canonical(f(X, _, - X)))), L)",
+    'findall(S, v(X)^_, Xs), maplist([Y, Z]>>format(string(Z), "<~w>", [Y]), Xs, L)':
+        'findall(S, member(X, VS), Xs), maplist([Y, Z]>>format(string(Z), "<~w>", [Y]), Xs, L)',
+    "v(X)^_, text_to_string(X, S)": "member(X, VS), text_to_string(X, S)",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(STORED_OUTPUT_GOALS))
+def test_output_into_text_over_stored_values_answers_as_swipl_on_both_paths(swipl, backend, goal):
+    import slr_sql
+
+    # (no numbers: text_to_string/2 takes none)
+    values = [v for v in STORED_TEXT_VALUES if v not in ("12", "-1.5")]
+    swi_goal = STORED_OUTPUT_GOALS[goal].replace("VS", f"[{', '.join(values)}]")
+    _, _, swi, [(_, _, names)] = swidiff.builtin_example(swi_goal)
+    theirs = swipl.run(swi)[0]
+    assert theirs["error"] is None and theirs["answers"]
+    expected = [swidiff.swi_answer(a, names) for a in theirs["answers"]]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(100)) as kb:
+        kb.add_many([f"v({v})^{i}" for i, v in enumerate(values, 1)])
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            answers = [swidiff.slr_answer(a, names) for a in kb.query(goal)]
+            assert answers == expected, (compiled, kb.explain(goal))
+
+
 # aggregate_all(max(X-W), ..) and min(X-W): slr_sql's witness form answers as the library's
 # max(X, W) and min(X, W) do (the first X must be a number; the first strictly better X wins;
 # each solution compared as it comes), so SWI-Prolog's answer to the X, W form is the oracle.
