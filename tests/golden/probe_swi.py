@@ -38,6 +38,10 @@ def probe(goals: list[str]) -> int:
                 continue
             try:
                 discarded = swidiff.check_example(example, theirs) is swidiff.DISCARDED
+            except swidiff.slr_sql.SLRSyntaxError as exc:   # (1r3, `abc`: no SWI syntax)
+                differ += 1
+                print(f"DIFF {goal}\n     slr_sql: {str(exc).splitlines()[0]}")
+                continue
             except AssertionError as exc:
                 differ += 1
                 print(f"DIFF {goal}\n     {str(exc).split(chr(10) + 'program:')[0][:300]}"
