@@ -88,6 +88,7 @@ _GOAL_ARGS: dict[tuple[str, int], tuple[int, ...]] = {
     ("\\+", 1): (0,), ("not", 1): (0,), ("call", 1): (0,),
     ("findall", 3): (1,), ("findall", 4): (1,), ("findAll", 3): (1,), ("forall", 2): (0, 1),
     ("aggregate_all", 3): (1,), ("bagof", 3): (1,), ("setof", 3): (1,), ("catch", 3): (0, 2),
+    ("$with_output_to", 2): (1,),   # (the library's with_output_to/2)
 }
 _PREV_NEXT = {("prev", 2), ("next", 2), ("next", 3)}
 # tf_lookup/4,5 read the stored transforms (slr_sql.frames), like prev/next

@@ -75,6 +75,12 @@ def _pi(name: str, arity: int, module: str | None = "system") -> Any:
 
 _OTHER_CONTEXTS: dict[tuple[str, int], Any] = {
     ("length", 2): _pi("length", 2, None),
+    ("$numbervars", 3): _pi("numbervars", 4),   # (SWI-Prolog's numbervars/3 calls /4)
+    ("$text_to_string", 2): _pi("text_to_string", 2),
+    ("$sformat", 3): _pi("sformat", 3), ("$sformat", 2): _pi("sformat", 2),
+    ("$nl_to", 1): _pi("nl", 1), ("$tab_to", 2): _pi("tab", 2),
+    **{(f"${name}_to", 2): _pi(name, 2)
+       for name in ("write", "print", "writeq", "write_canonical", "writeln")},
     ("$sub_string", 5): _pi("sub_string", 5),
     ("$char_type", 2): _pi("char_type", 2),
     ("$code_type", 2): _pi("code_type", 2),
@@ -2185,7 +2191,142 @@ def _list_to_set(m, a):
 # -- output ------------------------------------------------------------------------------------------
 
 def _out(m: "Machine"):
+    """Where write/1 & co. write: the innermost live with_output_to/2 capture, else the
+    engine's output (None: the process's standard output)."""
+    captures = m.captures
+    while captures:
+        height, cp = captures[-1]
+        cps = m.cps
+        if height < len(cps) and cps[height] is cp:
+            return cp[3]
+        captures.pop()   # its goal ended (succeeded, failed or threw): the capture is over
     return m.engine.out or sys.stdout
+
+
+class _Capture:
+    """with_output_to/2's text so far (bounded as format/2's output is), or a stream alias
+    its goal's output goes to (``with_output_to(user_error, G)``)."""
+
+    __slots__ = ("parts", "size", "stream", "position")
+
+    def __init__(self, stream: Any = None):
+        self.parts: list[str] = []
+        self.size = 0
+        self.stream = stream
+        # where the text's last line ends, as SWI-Prolog's stream counts it: format/2's
+        # column stops count from there (write(a), format("~t~w~10|", [b]) pads to 10)
+        self.position = 0
+
+    def write(self, text: str) -> None:
+        if self.stream is not None:
+            self.stream.write(text)
+            return
+        self.size += len(text)
+        if self.size > MAX_BUILT_TEXT:
+            raise resource_error("memory")
+        self.parts.append(text)
+        self.position = _line_position(text, self.position)
+
+
+# the text sinks of with_output_to/2 and format/3 (SWI-Prolog's)
+_TEXT_SINKS = frozenset((("atom", 1), ("string", 1), ("codes", 1), ("codes", 2), ("chars", 1),
+                         ("chars", 2)))
+
+
+def _stream_alias(m: "Machine", t: Any, sink: bool) -> Any:
+    """The output stream an alias names, as SWI-Prolog's: ``user_output`` (the query's
+    output, past any with_output_to/2 capture, as SWI-Prolog's alias is its standard output)
+    and ``user_error``; ``user_input`` is no output; slr_sql has no other streams. ``sink``:
+    where a text sink was possible too (with_output_to/2, format/3: what is no alias nor sink
+    is type_error(output, T); write/2 & co.: domain_error(stream_or_alias, T))."""
+    t = deref(t)
+    if type(t) is Var:
+        raise instantiation_error()
+    if type(t) is Atom and t != NIL:
+        if t == "user_output":
+            return m.engine.out or sys.stdout
+        if t == "user_error":
+            return sys.stderr
+        if t == "user_input":
+            raise iso_error(Struct("permission_error", (Atom("output"), Atom("stream"), t)))
+        raise iso_error(Struct("existence_error", (Atom("stream"), t)))
+    if sink:
+        raise type_error("output", t)
+    raise _err_domain("stream_or_alias", t)
+
+
+def _output_sink(m: "Machine", t: Any) -> Any:
+    """A text sink term (``atom(A)``, ``string(S)``, ``codes(C)``, ``codes(C, T)``,
+    ``chars(C)``, ``chars(C, T)``) as it is, or the stream an alias names."""
+    t = deref(t)
+    if type(t) is Struct and (t.name, len(t.args)) in _TEXT_SINKS:
+        return t
+    return _stream_alias(m, t, sink=True)
+
+
+def _unify_sink(m: "Machine", sink: Struct, text: str) -> bool:
+    """Unify a text sink's argument(s) with ``text``: an atom, a string, a code or
+    character list (with ``codes(C, T)``/``chars(C, T)`` a difference list ending in T)."""
+    kind = sink.name
+    if kind == "atom":
+        return m.unify(sink.args[0], Atom(text))
+    if kind == "string":
+        return m.unify(sink.args[0], String(text))
+    tail = sink.args[1] if len(sink.args) == 2 else NIL
+    if kind == "codes":
+        return m.unify(sink.args[0], make_list([ord(c) for c in text], tail))
+    return m.unify(sink.args[0], make_list([Atom(c) for c in text], tail))
+
+
+_WITH_OUTPUT_TO = _pi("with_output_to", 2)
+
+
+def capture_sink(m: "Machine", args: tuple) -> Any:
+    """with_output_to(Sink, Goal)'s checks, as SWI-Prolog's, the sink's first: the text sink
+    term (``string(S)``, ...) or the stream an alias names (what the goal's output goes to);
+    the engine then runs the goal as once/1 with its output captured.
+
+    >>> from slr_sql.engine import Engine
+    >>> capture_sink(Engine(Program()).machine(), (Struct("string", (Var("S"),)), Atom("true"))).name
+    Atom('string')
+    """
+    try:
+        sink = _output_sink(m, args[0])
+        goal = deref(args[1])
+        if type(goal) is Var:
+            raise instantiation_error()
+        if type(goal) not in (Atom, Struct):
+            raise type_error("callable", goal)
+        m.check_body(goal)
+    except SLREvaluationError as exc:
+        raise with_context(exc, _WITH_OUTPUT_TO)
+    # SWI-Prolog calls the goal from C: an undefined procedure names '$c_call_prolog'/0
+    m.meta_check(goal, _pi("$c_call_prolog", 0))
+    return sink
+
+
+def output_capture(sink: Any) -> _Capture:
+    """The capture of with_output_to/2's goal: its text, for a text sink; for a stream alias
+    the stream it passes the text on to.
+
+    >>> c = output_capture(Struct("atom", (Var("A"),))); c.write("ab"); "".join(c.parts)
+    'ab'
+    """
+    return _Capture(None if type(sink) is Struct else sink)
+
+
+def unify_sink(m: "Machine", sink: Any, capture: _Capture) -> bool:
+    """with_output_to/2's goal succeeded: the text sink unified with what it wrote (true for
+    a stream alias, which has had its text).
+
+    >>> from slr_sql.engine import Engine
+    >>> m = Engine(Program()).machine(); s = Var("S"); c = output_capture(Struct("string", (s,)))
+    >>> c.write("hi"); unify_sink(m, Struct("string", (s,)), c), s.ref
+    (True, String('hi'))
+    """
+    if type(sink) is not Struct:
+        return True
+    return _unify_sink(m, sink, "".join(capture.parts))
 
 
 def _write_text(t: Any, quoted: bool = False, deadline: float | None = None,
@@ -2202,40 +2343,186 @@ def _write_text(t: Any, quoted: bool = False, deadline: float | None = None,
                        var_names=prolog_var_name)
 
 
-@det("write", 1)
-def _write(m, a):
-    _out(m).write(_write_text(a[0], deadline=m.deadline))
-    return True
+def canonical_text(t: Any, deadline: float | None = None) -> str:
+    """A term as write_canonical/1 writes it, as SWI-Prolog's: quoted, every compound but a
+    list as ``name(arg, ...)`` (no operators), ``'$VAR'(N)`` as it is, and the variables
+    named by their first occurrence, ``A``, ``B``, ... for those met more than once and
+    ``_`` for those met once.
+
+    >>> x, y = Var("X"), Var("Y")
+    >>> canonical_text(Struct("f", (x, y, x, Struct("-", (1,)), Struct("$VAR", (1,)))))
+    "f(A,_,A,-(1),'$VAR'(1))"
+    """
+    from .terms import format_term
+
+    seen: dict[int, int] = {}
+    order: list[int] = []
+
+    def count(v: Var) -> str:
+        if id(v) not in seen:
+            order.append(id(v))
+        seen[id(v)] = seen.get(id(v), 0) + 1
+        return "_"
+
+    format_term(t, quoted=True, deadline=deadline, var_names=count, cycle_names=False,
+                ignore_ops=True)
+    names: dict[int, str] = {}
+    for key in order:
+        if seen[key] > 1:
+            n = len(names)   # A, ..., Z, A1, ... as numbervars/3 and write/1 name them
+            names[key] = chr(ord("A") + n % 26) + (str(n // 26) if n >= 26 else "")
+    return format_term(t, quoted=True, deadline=deadline, var_names=lambda v: names.get(id(v), "_"),
+                       cycle_names=False, ignore_ops=True)
 
 
-DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
-DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
-DET[("write_canonical", 1)] = \
-    lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline, numbervars=False)), True)[1]
-DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], deadline=m.deadline) + "\n"), True)[1]
+# write/1 & co.: (the text of the term, then what follows it); each also with a stream
+# alias first (write/2, ...), as SWI-Prolog's
+_WRITERS: dict[str, Callable[["Machine", Any], str]] = {
+    "write": lambda m, t: _write_text(t, deadline=m.deadline),
+    "print": lambda m, t: _write_text(t, True, m.deadline),
+    "writeq": lambda m, t: _write_text(t, True, m.deadline),
+    "write_canonical": lambda m, t: canonical_text(t, m.deadline),
+    "writeln": lambda m, t: _write_text(t, deadline=m.deadline) + "\n",
+}
+
+
+def _writer(name: str, with_stream: bool) -> Callable[["Machine", list], bool]:
+    text_of = _WRITERS[name]
+    if with_stream:
+        def write_to(m: "Machine", a: list) -> bool:
+            stream = _stream_alias(m, a[0], sink=False)
+            stream.write(text_of(m, a[1]))
+            return True
+        return write_to
+
+    def write(m: "Machine", a: list) -> bool:
+        _out(m).write(text_of(m, a[0]))
+        return True
+    return write
+
+
+# (the ones with a stream are the library's write/2, ... : a program written before slr_sql
+# had them keeps its own, as for the library's other predicates)
+for _name in _WRITERS:
+    DET[(_name, 1)] = _writer(_name, False)
+    DET[(f"${_name}_to", 2)] = _writer(_name, True)
 DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
+DET[("$nl_to", 1)] = lambda m, a: (_stream_alias(m, a[0], sink=False).write("\n"), True)[1]
 
 
-def _tab(m: "Machine", a: list) -> bool:
-    """tab(N): N spaces, N an integer expression (none for N < 0); as SWI-Prolog, a float
-    is type_error(integer_expression) and a count beyond 64 bits evaluation_error(int_overflow)."""
-    n = evaluate(a[0])
+def _spaces(n: Any) -> str:
+    """tab/1's spaces: N an integer expression (none for N < 0); as SWI-Prolog, a float is
+    type_error(integer_expression) and a count beyond 64 bits evaluation_error(int_overflow)."""
+    n = evaluate(n)
     if type(n) is not int:
         raise type_error("integer_expression", n)
     if n > sys.maxsize:
         raise evaluation_error("int_overflow")
     if n > MAX_BUILT_TEXT:
         raise resource_error("memory")
-    _out(m).write(" " * n)
+    return " " * n
+
+
+def _tab(m: "Machine", a: list) -> bool:
+    """tab(N): N spaces (:func:`_spaces`)."""
+    _out(m).write(_spaces(a[0]))
     return True
 
 
 DET[("tab", 1)] = _tab
+DET[("$tab_to", 2)] = lambda m, a: (_stream_alias(m, a[0], sink=False).write(_spaces(a[1])), True)[1]
 
 
-def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
+def _text_to_string(m: "Machine", a: list) -> bool:
+    """text_to_string(Text, S): an atom, a string or a code or character list (no number)
+    as a string, as SWI-Prolog's: a string Text is unified with S as it is; else a given S
+    is compared as text (an atom, a string, a number, a code or character list, ``[]`` the
+    empty text; what is none of these is no match)."""
+    text = text_in(a[0], "no_number")
+    if type(deref(a[0])) is String:
+        return m.unify(a[1], a[0])
+    result = deref(a[1])
+    if type(result) is Var:
+        return m.unify(result, String(text))
+    if type(result) is Struct and not (result.name == CONS and len(result.args) == 2):
+        return False
+    try:
+        return text_in(result, "any") == text
+    except SLREvaluationError:
+        return False
+
+
+DET[("$text_to_string", 2)] = _text_to_string
+
+
+_MESSAGE_PREFIXES = {"error": "ERROR: ", "warning": "Warning: ", "informational": "% "}
+
+
+def message_text(kind: Any, message: Any, deadline: float | None = None) -> str | None:
+    """The line print_message/2 writes to the standard error for a message of ``kind``
+    (None: nothing, for ``silent``): ``format(Format, Args)`` formatted, any other term as
+    SWI-Prolog writes a message it has no text for, after the kind's prefix.
+
+    >>> message_text(Atom("warning"), Struct("format", (String("~w late"), make_list([Atom("cup1")]))))
+    'Warning: cup1 late\\n'
+    >>> message_text(Atom("error"), Atom("oops")), message_text(Atom("silent"), Atom("x"))
+    ('ERROR: Unknown message: oops\\n', None)
+    """
+    kind = deref(kind)
+    if type(kind) is Var:
+        raise instantiation_error()
+    if type(kind) is Atom and kind == "silent":
+        return None
+    message = deref(message)
+    text = None
+    if type(message) is Struct and message.name == "format" and len(message.args) == 2:
+        try:
+            text = format_text(text_in(message.args[0], "whole", numbers=False),
+                               _format_args(message.args[1]), deadline)
+        except SLREvaluationError:
+            text = None
+    if text is None:
+        text = "Unknown message: " + _write_text(message, True, deadline)
+    prefix = _MESSAGE_PREFIXES.get(str(kind), "") if type(kind) is Atom else ""
+    return prefix + text + "\n"
+
+
+def _print_message(m: "Machine", a: list) -> bool:
+    """print_message(Kind, Message): its line to the standard error (never into a
+    with_output_to/2 capture), as SWI-Prolog's (:func:`message_text`)."""
+    text = message_text(a[0], a[1], m.deadline)
+    if text is not None:
+        sys.stderr.write(text)
+    return True
+
+
+DET[("$print_message", 2)] = _print_message
+
+
+def _numbervars(m: "Machine", a: list) -> bool:
+    """numbervars(T, Start, End): each unbound variable of T, depth-first left to right,
+    bound to ``'$VAR'(N)`` from N = Start (which write/1, print/1 and format/2 write as
+    ``A``, ``B``, ...); End the next number, as SWI-Prolog's."""
+    from .terms import term_vars
+
+    start = deref(a[1])
+    if type(start) is Var:
+        raise instantiation_error()
+    if type(start) is not int:
+        raise type_error("integer", start)
+    n = start
+    for v in term_vars(a[0], m.deadline):
+        m.unify(v, Struct("$VAR", (n,)))
+        n += 1
+    return m.unify(a[2], n)
+
+
+DET[("$numbervars", 3)] = _numbervars
+
+
+def format_text(fmt: str, args: list, deadline: float | None = None, start: int = 0) -> str:
     """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~E ~f ~g ~G ~n ~c ~r ~R ~8| ~t
-    ~~ ~i ~*c.
+    ~~ ~i ~*c; ``start``: the column the output goes on from (its column stops count from it).
 
     >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
     'cup has 3 items\\n'
@@ -2245,6 +2532,7 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
     i = 0
     n = len(fmt)
     columns = _ColumnStops(out)
+    columns.column = columns.position = start
 
     def take():
         if not args:
@@ -2424,6 +2712,9 @@ class _ColumnStops:
         self.start = 0            # the piece where the text since the last stop begins
         self.column = 0           # the column it begins at (format's count)
         self.position = 0         # where the output ends on its line there (the stream's)
+        # the last stop, where ~N+ counts from: the line's start before the first (even when
+        # format/2 goes on from a column of the stream's)
+        self.last_stop = 0
         self.fills: list[tuple[int, str]] = []   # (piece, fill character) of each ~t
         self.terms: set[int] = set()             # the pieces ~w, ~p, ~q wrote
 
@@ -2464,7 +2755,7 @@ class _ColumnStops:
         if count is None:
             target = here
         else:
-            target = self.column + count if relative else count
+            target = self.last_stop + count if relative else count
         pad = target - here
         if pad > 0:
             if self.fills:
@@ -2476,6 +2767,7 @@ class _ColumnStops:
         # the column is the stop's even where the text went past it (SWI-Prolog counts on
         # from the stop: "abcdef~3|~t~a~10|" pads 'x' from column 3)
         self.start, self.column, self.fills = len(out), target, []
+        self.last_stop = target
         self.terms.clear()
 
 
@@ -2634,32 +2926,40 @@ def _format_args(t: Any) -> list:
 
 @det("format", 1)
 def _format1(m, a):
-    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), [], m.deadline))
+    out = _out(m)
+    out.write(format_text(text_in(a[0], "whole", numbers=False), [], m.deadline,
+                          getattr(out, "position", 0)))
     return True
 
 
 @det("format", 2)
 def _format2(m, a):
-    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), _format_args(a[1]),
-                              m.deadline))
+    out = _out(m)
+    out.write(format_text(text_in(a[0], "whole", numbers=False), _format_args(a[1]),
+                          m.deadline, getattr(out, "position", 0)))
     return True
 
 
 @det("format", 3)
 def _format3(m, a):
-    sink = deref(a[0])
+    sink = _output_sink(m, a[0])
     text = format_text(text_in(a[1], "whole", numbers=False), _format_args(a[2]), m.deadline)
-    if type(sink) is Struct and len(sink.args) == 1:
-        kind = sink.name
-        if kind == "atom":
-            return m.unify(sink.args[0], Atom(text))
-        if kind == "string":
-            return m.unify(sink.args[0], String(text))
-        if kind == "codes":
-            return m.unify(sink.args[0], make_list([ord(c) for c in text]))
-        if kind == "chars":
-            return m.unify(sink.args[0], make_list([Atom(c) for c in text]))
-    raise _err_domain("output_sink", sink)
+    if type(sink) is Struct:
+        return _unify_sink(m, sink, text)
+    sink.write(text)
+    return True
+
+
+def _sformat(m: "Machine", a: list) -> bool:
+    """sformat(S, Format[, Args]): format/3 into a string, SWI-Prolog's old spelling of
+    ``format(string(S), Format, Args)``."""
+    args = _format_args(a[2]) if len(a) == 3 else []
+    text = format_text(text_in(a[1], "whole", numbers=False), args, m.deadline)
+    return m.unify(a[0], String(text))
+
+
+DET[("$sformat", 3)] = _sformat
+DET[("$sformat", 2)] = _sformat
 
 
 DET[("halt", 0)] = lambda m, a: (_ for _ in ()).throw(
@@ -3657,6 +3957,61 @@ ord_add_element(Set, El, Add) :- '$ord_add_element'(Set, El, Add).
 '$ord_addel'('<', H, T, El, [H|Add]) :- '$ord_add_element'(T, El, Add).
 '$ord_addel'('=', H, T, _, [H|T]).
 '$ord_addel'('>', H, T, El, [El, H|T]).
+'>>'(Ps, L) :- '$lambda'(Ps, [], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'>>'(Ps, L, A1) :- '$lambda'(Ps, [A1], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'>>'(Ps, L, A1, A2) :- '$lambda'(Ps, [A1, A2], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'>>'(Ps, L, A1, A2, A3) :- '$lambda'(Ps, [A1, A2, A3], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'>>'(Ps, L, A1, A2, A3, A4) :- '$lambda'(Ps, [A1, A2, A3, A4], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'>>'(Ps, L, A1, A2, A3, A4, A5) :- '$lambda'(Ps, [A1, A2, A3, A4, A5], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'>>'(Ps, L, A1, A2, A3, A4, A5, A6) :- '$lambda'(Ps, [A1, A2, A3, A4, A5, A6], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'>>'(Ps, L, A1, A2, A3, A4, A5, A6, A7) :- '$lambda'(Ps, [A1, A2, A3, A4, A5, A6, A7], Extra, L, LC), G =.. [call, LC|Extra], call(G).
+'/'(Free, L) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC).
+'/'(Free, L, A1) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC, A1).
+'/'(Free, L, A1, A2) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC, A1, A2).
+'/'(Free, L, A1, A2, A3) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC, A1, A2, A3).
+'/'(Free, L, A1, A2, A3, A4) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC, A1, A2, A3, A4).
+'/'(Free, L, A1, A2, A3, A4, A5) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC, A1, A2, A3, A4, A5).
+'/'(Free, L, A1, A2, A3, A4, A5, A6) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC, A1, A2, A3, A4, A5, A6).
+'/'(Free, L, A1, A2, A3, A4, A5, A6, A7) :- '$lambda_free'(Free), copy_term(Free+L, Free+LC), call(LC, A1, A2, A3, A4, A5, A6, A7).
+'$lambda'(Ps, _, _, _, _) :- var(Ps), !, throw(error(instantiation_error, _)).
+'$lambda'(Free/Ps, Args, Extra, L, LC) :- !, '$lambda_free'(Free), '$must_be_list'(Ps), copy_term(Free/Ps>>L, Free/PsC>>LC), '$lambda_params'(PsC, Args, Extra, Free/Ps>>(user:L)).
+'$lambda'(Ps, Args, Extra, L, LC) :- '$must_be_list'(Ps), copy_term(Ps>>L, PsC>>LC), '$lambda_params'(PsC, Args, Extra, Ps>>(user:L)).
+'$lambda_params'([], Extra, Extra, _) :- !.
+'$lambda_params'([P|Ps], [A|As], Extra, C) :- !, P = A, '$lambda_params'(Ps, As, Extra, C).
+'$lambda_params'(_, _, _, C) :- throw(error(domain_error(lambda_parameters, C), _)).
+'$lambda_free'(F) :- var(F), !, throw(error(instantiation_error, _)).
+'$lambda_free'({_}) :- !.
+'$lambda_free'({}) :- !.
+'$lambda_free'(F) :- throw(error(type_error(lambda_free, F), _)).
+max_member(P, M, L) :- var(L), !, throw(error(existence_error(matching_rule, lists:max_member(user:P, M, L)), context(lists:max_member/3, _))).
+max_member(P, M, [H|T]) :- !, '$max_member3'(T, P, H, M).
+max_member(_, _, []) :- !, fail.
+max_member(P, M, L) :- throw(error(existence_error(matching_rule, lists:max_member(user:P, M, L)), context(lists:max_member/3, _))).
+'$max_member3'(L, P, M0, M) :- var(L), !, throw(error(existence_error(matching_rule, lists:max_member_(L, user:P, M0, M)), context(lists:max_member_/4, _))).
+'$max_member3'([], _, M0, M) :- !, M = M0.
+'$max_member3'([H|T], P, M0, M) :- !, ( call(P, H, M0) -> '$max_member3'(T, P, M0, M) ; '$max_member3'(T, P, H, M) ).
+'$max_member3'(L, P, M0, M) :- throw(error(existence_error(matching_rule, lists:max_member_(L, user:P, M0, M)), context(lists:max_member_/4, _))).
+min_member(P, M, L) :- var(L), !, throw(error(existence_error(matching_rule, lists:min_member(user:P, M, L)), context(lists:min_member/3, _))).
+min_member(P, M, [H|T]) :- !, '$min_member3'(T, P, H, M).
+min_member(_, _, []) :- !, fail.
+min_member(P, M, L) :- throw(error(existence_error(matching_rule, lists:min_member(user:P, M, L)), context(lists:min_member/3, _))).
+'$min_member3'(L, P, M0, M) :- var(L), !, throw(error(existence_error(matching_rule, lists:min_member_(L, user:P, M0, M)), context(lists:min_member_/4, _))).
+'$min_member3'([], _, M0, M) :- !, M = M0.
+'$min_member3'([H|T], P, M0, M) :- !, ( call(P, M0, H) -> '$min_member3'(T, P, M0, M) ; '$min_member3'(T, P, H, M) ).
+'$min_member3'(L, P, M0, M) :- throw(error(existence_error(matching_rule, lists:min_member_(L, user:P, M0, M)), context(lists:min_member_/4, _))).
+with_output_to(Sink, Goal) :- '$with_output_to'(Sink, Goal).
+write(S, T) :- '$write_to'(S, T).
+print(S, T) :- '$print_to'(S, T).
+writeq(S, T) :- '$writeq_to'(S, T).
+write_canonical(S, T) :- '$write_canonical_to'(S, T).
+writeln(S, T) :- '$writeln_to'(S, T).
+nl(S) :- '$nl_to'(S).
+tab(S, N) :- '$tab_to'(S, N).
+sformat(S, F, A) :- '$sformat'(S, F, A).
+sformat(S, F) :- '$sformat'(S, F).
+numbervars(T, S, E) :- '$numbervars'(T, S, E).
+text_to_string(T, S) :- '$text_to_string'(T, S).
+print_message(Kind, Message) :- '$print_message'(Kind, Message).
 ord_del_element(Set, El, Del) :- '$ord_del_element'(Set, El, Del).
 '$ord_del_element'([], _, []).
 '$ord_del_element'([H|T], El, Del) :- compare(Order, H, El), '$ord_delel'(Order, H, T, El, Del).

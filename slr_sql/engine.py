@@ -55,7 +55,7 @@ def resident_bytes() -> int | None:
 
 
 # choicepoint kinds
-K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH, K_REACTIVATE = range(7)
+K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH, K_REACTIVATE, K_OUTPUT = range(8)
 
 
 class PrologThrow(Exception):
@@ -75,7 +75,7 @@ class Special:
         self.data = data
 
 
-S_CUT_TO, S_SOFTCUT, S_NAFAIL, S_COLLECT, S_POPCATCH, S_RULES = range(6)
+S_CUT_TO, S_SOFTCUT, S_NAFAIL, S_COLLECT, S_POPCATCH, S_RULES, S_OUTPUT_DONE = range(7)
 
 
 class Engine:
@@ -114,7 +114,7 @@ CONTROL = {
     ("call", 1), ("call", 2), ("call", 3), ("call", 4), ("call", 5), ("call", 6), ("call", 7),
     ("call", 8), ("findall", 3), ("findall", 4), ("findAll", 3), ("forall", 2),
     ("aggregate_all", 3), ("bagof", 3), ("setof", 3), ("catch", 3), ("throw", 1),
-    ("fail", 0), ("false", 0), ("^", 2), ("not", 1),
+    ("fail", 0), ("false", 0), ("^", 2), ("not", 1), ("$with_output_to", 2),
 }
 
 
@@ -151,6 +151,9 @@ class Machine:
         # the bodies check_body walked (\+ \+ ... nested N deep walked each nested body
         # again, N²/2 steps)
         self._bodies = CheckedBodies()
+        # with_output_to/2's captures, innermost last: (height, choicepoint), each live while
+        # its choicepoint is still on the stack at that height (builtins.current_output)
+        self.captures: list = []
 
     # -- helpers used by builtins -------------------------------------------------------
     def unify(self, a: Any, b: Any) -> bool:
@@ -353,7 +356,7 @@ class Machine:
                 # backtracking into a catch/3 goal that had exited: the catch is active again
                 cps.pop()
                 cp[3][0] = K_CATCH
-            else:  # K_DEAD, K_CATCH: nothing to resume
+            else:  # K_DEAD, K_CATCH, K_OUTPUT: nothing to resume
                 cps.pop()
         return False
 
@@ -534,6 +537,18 @@ class Machine:
             # (raised inside the catch: catch/3 catches it)
             self.meta_check(args[0], _SYSTEM_CATCH)
             return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
+        if name == "$with_output_to":
+            # the goal as once/1 with its output captured: the capture is a choicepoint, so
+            # it ends with its goal however the goal ends (a failure or an error backtracks
+            # past it, and the output goes where it went before)
+            from .builtins import capture_sink, output_capture
+
+            sink = capture_sink(self, args)
+            height = len(cps)
+            cp = [K_OUTPUT, len(self.trail), None, output_capture(sink), None, None]
+            cps.append(cp)
+            self.captures.append((height, cp))
+            return (args[1], height + 1, (Special(S_OUTPUT_DONE, (height, cp, sink)), cb, nxt))
         # collection predicates
         from .builtins import collector
 
@@ -557,6 +572,14 @@ class Machine:
             if each is not None:
                 each(found)
             return False
+        if op == S_OUTPUT_DONE:
+            # with_output_to/2's goal succeeded: its other solutions cut (once/1), the
+            # capture ended, the sink unified with the text
+            from .builtins import unify_sink
+
+            height, cp, sink = goal.data
+            del self.cps[height:]
+            return nxt if unify_sink(self, sink, cp[3]) else False
         if op == S_RULES:
             pred, args = goal.data
             return self._call_pred(pred, args, nxt)

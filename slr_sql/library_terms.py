@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = 'bd8c2e6a816e2c36095e5057c1a5d14077356b9f11f252cc2643e71e62ecd869'
+SOURCE_SHA256 = '4804cfe93d16c4d0cb1f0b7553ff338bead3b038219516aa328fdbf6df839a43'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -371,16 +371,126 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 179, 1, 179, 35), (('H', v[0]), ('T', v[1]), ), source[12931:12965]))
     v = [Var('H'), Var('T'), Var('El')]
     out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 180, 1, 180, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[12966:13005]))
-    v = [Var('Set'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 181, 1, 181, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[13006:13072]))
+    v = [Var('Ps'), Var('L'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1])), S(A(','), (S(A('$lambda'), (v[0], A('[]'), v[2], v[1], v[3])), S(A(','), (S(A('=..'), (v[4], S(A('.'), (A('call'), S(A('.'), (v[3], v[2])))))), S(A('call'), (v[4],)))))), Span('<library>', 181, 1, 181, 81), (('Ps', v[0]), ('L', v[1]), ('Extra', v[2]), ('LC', v[3]), ('G', v[4]), ), source[13006:13086]))
+    v = [Var('Ps'), Var('L'), Var('A1'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1], v[2])), S(A(','), (S(A('$lambda'), (v[0], S(A('.'), (v[2], A('[]'))), v[3], v[1], v[4])), S(A(','), (S(A('=..'), (v[5], S(A('.'), (A('call'), S(A('.'), (v[4], v[3])))))), S(A('call'), (v[5],)))))), Span('<library>', 182, 1, 182, 87), (('Ps', v[0]), ('L', v[1]), ('A1', v[2]), ('Extra', v[3]), ('LC', v[4]), ('G', v[5]), ), source[13087:13173]))
+    v = [Var('Ps'), Var('L'), Var('A1'), Var('A2'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('$lambda'), (v[0], S(A('.'), (v[2], S(A('.'), (v[3], A('[]'))))), v[4], v[1], v[5])), S(A(','), (S(A('=..'), (v[6], S(A('.'), (A('call'), S(A('.'), (v[5], v[4])))))), S(A('call'), (v[6],)))))), Span('<library>', 183, 1, 183, 95), (('Ps', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('Extra', v[4]), ('LC', v[5]), ('G', v[6]), ), source[13174:13268]))
+    v = [Var('Ps'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('$lambda'), (v[0], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], A('[]'))))))), v[5], v[1], v[6])), S(A(','), (S(A('=..'), (v[7], S(A('.'), (A('call'), S(A('.'), (v[6], v[5])))))), S(A('call'), (v[7],)))))), Span('<library>', 184, 1, 184, 103), (('Ps', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('Extra', v[5]), ('LC', v[6]), ('G', v[7]), ), source[13269:13371]))
+    v = [Var('Ps'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1], v[2], v[3], v[4], v[5])), S(A(','), (S(A('$lambda'), (v[0], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], S(A('.'), (v[5], A('[]'))))))))), v[6], v[1], v[7])), S(A(','), (S(A('=..'), (v[8], S(A('.'), (A('call'), S(A('.'), (v[7], v[6])))))), S(A('call'), (v[8],)))))), Span('<library>', 185, 1, 185, 111), (('Ps', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('Extra', v[6]), ('LC', v[7]), ('G', v[8]), ), source[13372:13482]))
+    v = [Var('Ps'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('A5'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6])), S(A(','), (S(A('$lambda'), (v[0], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], S(A('.'), (v[5], S(A('.'), (v[6], A('[]'))))))))))), v[7], v[1], v[8])), S(A(','), (S(A('=..'), (v[9], S(A('.'), (A('call'), S(A('.'), (v[8], v[7])))))), S(A('call'), (v[9],)))))), Span('<library>', 186, 1, 186, 119), (('Ps', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('A5', v[6]), ('Extra', v[7]), ('LC', v[8]), ('G', v[9]), ), source[13483:13601]))
+    v = [Var('Ps'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('A5'), Var('A6'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])), S(A(','), (S(A('$lambda'), (v[0], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], S(A('.'), (v[5], S(A('.'), (v[6], S(A('.'), (v[7], A('[]'))))))))))))), v[8], v[1], v[9])), S(A(','), (S(A('=..'), (v[10], S(A('.'), (A('call'), S(A('.'), (v[9], v[8])))))), S(A('call'), (v[10],)))))), Span('<library>', 187, 1, 187, 127), (('Ps', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('A5', v[6]), ('A6', v[7]), ('Extra', v[8]), ('LC', v[9]), ('G', v[10]), ), source[13602:13728]))
+    v = [Var('Ps'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('A5'), Var('A6'), Var('A7'), Var('Extra'), Var('LC'), Var('G')]
+    out.append(Clause(S(A('>>'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8])), S(A(','), (S(A('$lambda'), (v[0], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], S(A('.'), (v[5], S(A('.'), (v[6], S(A('.'), (v[7], S(A('.'), (v[8], A('[]'))))))))))))))), v[9], v[1], v[10])), S(A(','), (S(A('=..'), (v[11], S(A('.'), (A('call'), S(A('.'), (v[10], v[9])))))), S(A('call'), (v[11],)))))), Span('<library>', 188, 1, 188, 135), (('Ps', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('A5', v[6]), ('A6', v[7]), ('A7', v[8]), ('Extra', v[9]), ('LC', v[10]), ('G', v[11]), ), source[13729:13863]))
+    v = [Var('Free'), Var('L'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[2])))), S(A('call'), (v[2],)))))), Span('<library>', 189, 1, 189, 76), (('Free', v[0]), ('L', v[1]), ('LC', v[2]), ), source[13864:13939]))
+    v = [Var('Free'), Var('L'), Var('A1'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1], v[2])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[3])))), S(A('call'), (v[3], v[2])))))), Span('<library>', 190, 1, 190, 84), (('Free', v[0]), ('L', v[1]), ('A1', v[2]), ('LC', v[3]), ), source[13940:14023]))
+    v = [Var('Free'), Var('L'), Var('A1'), Var('A2'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[4])))), S(A('call'), (v[4], v[2], v[3])))))), Span('<library>', 191, 1, 191, 92), (('Free', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('LC', v[4]), ), source[14024:14115]))
+    v = [Var('Free'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[5])))), S(A('call'), (v[5], v[2], v[3], v[4])))))), Span('<library>', 192, 1, 192, 100), (('Free', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('LC', v[5]), ), source[14116:14215]))
+    v = [Var('Free'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1], v[2], v[3], v[4], v[5])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[6])))), S(A('call'), (v[6], v[2], v[3], v[4], v[5])))))), Span('<library>', 193, 1, 193, 108), (('Free', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('LC', v[6]), ), source[14216:14323]))
+    v = [Var('Free'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('A5'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[7])))), S(A('call'), (v[7], v[2], v[3], v[4], v[5], v[6])))))), Span('<library>', 194, 1, 194, 116), (('Free', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('A5', v[6]), ('LC', v[7]), ), source[14324:14439]))
+    v = [Var('Free'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('A5'), Var('A6'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[8])))), S(A('call'), (v[8], v[2], v[3], v[4], v[5], v[6], v[7])))))), Span('<library>', 195, 1, 195, 124), (('Free', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('A5', v[6]), ('A6', v[7]), ('LC', v[8]), ), source[14440:14563]))
+    v = [Var('Free'), Var('L'), Var('A1'), Var('A2'), Var('A3'), Var('A4'), Var('A5'), Var('A6'), Var('A7'), Var('LC')]
+    out.append(Clause(S(A('/'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8])), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('+'), (v[0], v[1])), S(A('+'), (v[0], v[9])))), S(A('call'), (v[9], v[2], v[3], v[4], v[5], v[6], v[7], v[8])))))), Span('<library>', 196, 1, 196, 132), (('Free', v[0]), ('L', v[1]), ('A1', v[2]), ('A2', v[3]), ('A3', v[4]), ('A4', v[5]), ('A5', v[6]), ('A6', v[7]), ('A7', v[8]), ('LC', v[9]), ), source[14564:14695]))
+    v = [Var('Ps'), Var('_'), Var('_'), Var('_'), Var('_'), Var('_')]
+    out.append(Clause(S(A('$lambda'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[5])),)))))), Span('<library>', 197, 1, 197, 79), (('Ps', v[0]), ), source[14696:14774]))
+    v = [Var('Free'), Var('Ps'), Var('Args'), Var('Extra'), Var('L'), Var('LC'), Var('PsC')]
+    out.append(Clause(S(A('$lambda'), (S(A('/'), (v[0], v[1])), v[2], v[3], v[4], v[5])), S(A(','), (A('!'), S(A(','), (S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('$must_be_list'), (v[1],)), S(A(','), (S(A('copy_term'), (S(A('>>'), (S(A('/'), (v[0], v[1])), v[4])), S(A('>>'), (S(A('/'), (v[0], v[6])), v[5])))), S(A('$lambda_params'), (v[6], v[2], v[3], S(A('>>'), (S(A('/'), (v[0], v[1])), S(A(':'), (A('user'), v[4])))))))))))))), Span('<library>', 198, 1, 198, 180), (('Free', v[0]), ('Ps', v[1]), ('Args', v[2]), ('Extra', v[3]), ('L', v[4]), ('LC', v[5]), ('PsC', v[6]), ), source[14775:14954]))
+    v = [Var('Ps'), Var('Args'), Var('Extra'), Var('L'), Var('LC'), Var('PsC')]
+    out.append(Clause(S(A('$lambda'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('$must_be_list'), (v[0],)), S(A(','), (S(A('copy_term'), (S(A('>>'), (v[0], v[3])), S(A('>>'), (v[5], v[4])))), S(A('$lambda_params'), (v[5], v[1], v[2], S(A('>>'), (v[0], S(A(':'), (A('user'), v[3])))))))))), Span('<library>', 199, 1, 199, 135), (('Ps', v[0]), ('Args', v[1]), ('Extra', v[2]), ('L', v[3]), ('LC', v[4]), ('PsC', v[5]), ), source[14955:15089]))
+    v = [Var('Extra'), Var('_')]
+    out.append(Clause(S(A('$lambda_params'), (A('[]'), v[0], v[0], v[1])), A('!'), Span('<library>', 200, 1, 200, 44), (('Extra', v[0]), ), source[15090:15133]))
+    v = [Var('P'), Var('Ps'), Var('A'), Var('As'), Var('Extra'), Var('C')]
+    out.append(Clause(S(A('$lambda_params'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])), v[4], v[5])), S(A(','), (A('!'), S(A(','), (S(A('='), (v[0], v[2])), S(A('$lambda_params'), (v[1], v[3], v[4], v[5])))))), Span('<library>', 201, 1, 201, 92), (('P', v[0]), ('Ps', v[1]), ('A', v[2]), ('As', v[3]), ('Extra', v[4]), ('C', v[5]), ), source[15134:15225]))
+    v = [Var('_'), Var('_'), Var('_'), Var('C'), Var('_')]
+    out.append(Clause(S(A('$lambda_params'), (v[0], v[1], v[2], v[3])), S(A('throw'), (S(A('error'), (S(A('domain_error'), (A('lambda_parameters'), v[3])), v[4])),)), Span('<library>', 202, 1, 202, 85), (('C', v[3]), ), source[15226:15310]))
+    v = [Var('F'), Var('_')]
+    out.append(Clause(S(A('$lambda_free'), (v[0],)), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[1])),)))))), Span('<library>', 203, 1, 203, 70), (('F', v[0]), ), source[15311:15380]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 182, 1, 182, 31), (), source[13073:13103]))
+    out.append(Clause(S(A('$lambda_free'), (S(A('{}'), (v[0],)),)), A('!'), Span('<library>', 204, 1, 204, 26), (), source[15381:15406]))
+    v = []
+    out.append(Clause(S(A('$lambda_free'), (A('{}'),)), A('!'), Span('<library>', 205, 1, 205, 25), (), source[15407:15431]))
+    v = [Var('F'), Var('_')]
+    out.append(Clause(S(A('$lambda_free'), (v[0],)), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('lambda_free'), v[0])), v[1])),)), Span('<library>', 206, 1, 206, 66), (('F', v[0]), ), source[15432:15497]))
+    v = [Var('P'), Var('M'), Var('L'), Var('_')]
+    out.append(Clause(S(A('max_member'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[2],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('max_member'), (S(A(':'), (A('user'), v[0])), v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('max_member'), 3)))), v[3])))),)))))), Span('<library>', 207, 1, 207, 144), (('P', v[0]), ('M', v[1]), ('L', v[2]), ), source[15498:15641]))
+    v = [Var('P'), Var('M'), Var('H'), Var('T')]
+    out.append(Clause(S(A('max_member'), (v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (A('!'), S(A('$max_member3'), (v[3], v[0], v[2], v[1])))), Span('<library>', 208, 1, 208, 58), (('P', v[0]), ('M', v[1]), ('H', v[2]), ('T', v[3]), ), source[15642:15699]))
+    v = [Var('_'), Var('_')]
+    out.append(Clause(S(A('max_member'), (v[0], v[1], A('[]'))), S(A(','), (A('!'), A('fail'))), Span('<library>', 209, 1, 209, 33), (), source[15700:15732]))
+    v = [Var('P'), Var('M'), Var('L'), Var('_')]
+    out.append(Clause(S(A('max_member'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('max_member'), (S(A(':'), (A('user'), v[0])), v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('max_member'), 3)))), v[3])))),)), Span('<library>', 210, 1, 210, 133), (('P', v[0]), ('M', v[1]), ('L', v[2]), ), source[15733:15865]))
+    v = [Var('L'), Var('P'), Var('M0'), Var('M'), Var('_')]
+    out.append(Clause(S(A('$max_member3'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('max_member_'), (v[0], S(A(':'), (A('user'), v[1])), v[2], v[3])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('max_member_'), 4)))), v[4])))),)))))), Span('<library>', 211, 1, 211, 158), (('L', v[0]), ('P', v[1]), ('M0', v[2]), ('M', v[3]), ), source[15866:16023]))
+    v = [Var('_'), Var('M0'), Var('M')]
+    out.append(Clause(S(A('$max_member3'), (A('[]'), v[0], v[1], v[2])), S(A(','), (A('!'), S(A('='), (v[2], v[1])))), Span('<library>', 212, 1, 212, 43), (('M0', v[1]), ('M', v[2]), ), source[16024:16066]))
+    v = [Var('H'), Var('T'), Var('P'), Var('M0'), Var('M')]
+    out.append(Clause(S(A('$max_member3'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (A('!'), S(A(';'), (S(A('->'), (S(A('call'), (v[2], v[0], v[3])), S(A('$max_member3'), (v[1], v[2], v[3], v[4])))), S(A('$max_member3'), (v[1], v[2], v[0], v[4])))))), Span('<library>', 213, 1, 213, 118), (('H', v[0]), ('T', v[1]), ('P', v[2]), ('M0', v[3]), ('M', v[4]), ), source[16067:16184]))
+    v = [Var('L'), Var('P'), Var('M0'), Var('M'), Var('_')]
+    out.append(Clause(S(A('$max_member3'), (v[0], v[1], v[2], v[3])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('max_member_'), (v[0], S(A(':'), (A('user'), v[1])), v[2], v[3])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('max_member_'), 4)))), v[4])))),)), Span('<library>', 214, 1, 214, 147), (('L', v[0]), ('P', v[1]), ('M0', v[2]), ('M', v[3]), ), source[16185:16331]))
+    v = [Var('P'), Var('M'), Var('L'), Var('_')]
+    out.append(Clause(S(A('min_member'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[2],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('min_member'), (S(A(':'), (A('user'), v[0])), v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('min_member'), 3)))), v[3])))),)))))), Span('<library>', 215, 1, 215, 144), (('P', v[0]), ('M', v[1]), ('L', v[2]), ), source[16332:16475]))
+    v = [Var('P'), Var('M'), Var('H'), Var('T')]
+    out.append(Clause(S(A('min_member'), (v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (A('!'), S(A('$min_member3'), (v[3], v[0], v[2], v[1])))), Span('<library>', 216, 1, 216, 58), (('P', v[0]), ('M', v[1]), ('H', v[2]), ('T', v[3]), ), source[16476:16533]))
+    v = [Var('_'), Var('_')]
+    out.append(Clause(S(A('min_member'), (v[0], v[1], A('[]'))), S(A(','), (A('!'), A('fail'))), Span('<library>', 217, 1, 217, 33), (), source[16534:16566]))
+    v = [Var('P'), Var('M'), Var('L'), Var('_')]
+    out.append(Clause(S(A('min_member'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('min_member'), (S(A(':'), (A('user'), v[0])), v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('min_member'), 3)))), v[3])))),)), Span('<library>', 218, 1, 218, 133), (('P', v[0]), ('M', v[1]), ('L', v[2]), ), source[16567:16699]))
+    v = [Var('L'), Var('P'), Var('M0'), Var('M'), Var('_')]
+    out.append(Clause(S(A('$min_member3'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('min_member_'), (v[0], S(A(':'), (A('user'), v[1])), v[2], v[3])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('min_member_'), 4)))), v[4])))),)))))), Span('<library>', 219, 1, 219, 158), (('L', v[0]), ('P', v[1]), ('M0', v[2]), ('M', v[3]), ), source[16700:16857]))
+    v = [Var('_'), Var('M0'), Var('M')]
+    out.append(Clause(S(A('$min_member3'), (A('[]'), v[0], v[1], v[2])), S(A(','), (A('!'), S(A('='), (v[2], v[1])))), Span('<library>', 220, 1, 220, 43), (('M0', v[1]), ('M', v[2]), ), source[16858:16900]))
+    v = [Var('H'), Var('T'), Var('P'), Var('M0'), Var('M')]
+    out.append(Clause(S(A('$min_member3'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (A('!'), S(A(';'), (S(A('->'), (S(A('call'), (v[2], v[3], v[0])), S(A('$min_member3'), (v[1], v[2], v[3], v[4])))), S(A('$min_member3'), (v[1], v[2], v[0], v[4])))))), Span('<library>', 221, 1, 221, 118), (('H', v[0]), ('T', v[1]), ('P', v[2]), ('M0', v[3]), ('M', v[4]), ), source[16901:17018]))
+    v = [Var('L'), Var('P'), Var('M0'), Var('M'), Var('_')]
+    out.append(Clause(S(A('$min_member3'), (v[0], v[1], v[2], v[3])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('min_member_'), (v[0], S(A(':'), (A('user'), v[1])), v[2], v[3])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('min_member_'), 4)))), v[4])))),)), Span('<library>', 222, 1, 222, 147), (('L', v[0]), ('P', v[1]), ('M0', v[2]), ('M', v[3]), ), source[17019:17165]))
+    v = [Var('Sink'), Var('Goal')]
+    out.append(Clause(S(A('with_output_to'), (v[0], v[1])), S(A('$with_output_to'), (v[0], v[1])), Span('<library>', 223, 1, 223, 61), (('Sink', v[0]), ('Goal', v[1]), ), source[17166:17226]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('write'), (v[0], v[1])), S(A('$write_to'), (v[0], v[1])), Span('<library>', 224, 1, 224, 34), (('S', v[0]), ('T', v[1]), ), source[17227:17260]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('print'), (v[0], v[1])), S(A('$print_to'), (v[0], v[1])), Span('<library>', 225, 1, 225, 34), (('S', v[0]), ('T', v[1]), ), source[17261:17294]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('writeq'), (v[0], v[1])), S(A('$writeq_to'), (v[0], v[1])), Span('<library>', 226, 1, 226, 36), (('S', v[0]), ('T', v[1]), ), source[17295:17330]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('write_canonical'), (v[0], v[1])), S(A('$write_canonical_to'), (v[0], v[1])), Span('<library>', 227, 1, 227, 54), (('S', v[0]), ('T', v[1]), ), source[17331:17384]))
+    v = [Var('S'), Var('T')]
+    out.append(Clause(S(A('writeln'), (v[0], v[1])), S(A('$writeln_to'), (v[0], v[1])), Span('<library>', 228, 1, 228, 38), (('S', v[0]), ('T', v[1]), ), source[17385:17422]))
+    v = [Var('S')]
+    out.append(Clause(S(A('nl'), (v[0],)), S(A('$nl_to'), (v[0],)), Span('<library>', 229, 1, 229, 22), (('S', v[0]), ), source[17423:17444]))
+    v = [Var('S'), Var('N')]
+    out.append(Clause(S(A('tab'), (v[0], v[1])), S(A('$tab_to'), (v[0], v[1])), Span('<library>', 230, 1, 230, 30), (('S', v[0]), ('N', v[1]), ), source[17445:17474]))
+    v = [Var('S'), Var('F'), Var('A')]
+    out.append(Clause(S(A('sformat'), (v[0], v[1], v[2])), S(A('$sformat'), (v[0], v[1], v[2])), Span('<library>', 231, 1, 231, 41), (('S', v[0]), ('F', v[1]), ('A', v[2]), ), source[17475:17515]))
+    v = [Var('S'), Var('F')]
+    out.append(Clause(S(A('sformat'), (v[0], v[1])), S(A('$sformat'), (v[0], v[1])), Span('<library>', 232, 1, 232, 35), (('S', v[0]), ('F', v[1]), ), source[17516:17550]))
+    v = [Var('T'), Var('S'), Var('E')]
+    out.append(Clause(S(A('numbervars'), (v[0], v[1], v[2])), S(A('$numbervars'), (v[0], v[1], v[2])), Span('<library>', 233, 1, 233, 47), (('T', v[0]), ('S', v[1]), ('E', v[2]), ), source[17551:17597]))
+    v = [Var('T'), Var('S')]
+    out.append(Clause(S(A('text_to_string'), (v[0], v[1])), S(A('$text_to_string'), (v[0], v[1])), Span('<library>', 234, 1, 234, 49), (('T', v[0]), ('S', v[1]), ), source[17598:17646]))
+    v = [Var('Kind'), Var('Message')]
+    out.append(Clause(S(A('print_message'), (v[0], v[1])), S(A('$print_message'), (v[0], v[1])), Span('<library>', 235, 1, 235, 65), (('Kind', v[0]), ('Message', v[1]), ), source[17647:17711]))
+    v = [Var('Set'), Var('El'), Var('Del')]
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 236, 1, 236, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[17712:17778]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 237, 1, 237, 31), (), source[17779:17809]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
-    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 183, 1, 183, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[13104:13200]))
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 238, 1, 238, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[17810:17906]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 184, 1, 184, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[13201:13272]))
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 239, 1, 239, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[17907:17978]))
     v = [Var('_'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 185, 1, 185, 31), (('T', v[1]), ), source[13273:13303]))
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 240, 1, 240, 31), (('T', v[1]), ), source[17979:18009]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 186, 1, 186, 35), (('H', v[0]), ('T', v[1]), ), source[13304:13338]))
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 241, 1, 241, 35), (('H', v[0]), ('T', v[1]), ), source[18010:18044]))
     return out

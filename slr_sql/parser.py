@@ -324,6 +324,11 @@ class _Resolver:
 
     def operator_expected(self, tok: Token) -> _Fail:
         text = _state.text
+        pos = tok.start_pos
+        if pos and text[pos - 1].isdigit() and _RATIONAL_TAIL.match(text, pos):
+            # SWI-Prolog 9 reads 1r3 as a rational number; slr_sql has no rationals
+            return _Fail("rational numbers such as 1r3 are not supported (1/3 is the float "
+                         "0.333...)", pos)
         line_start = text.rfind("\n", 0, tok.start_pos) + 1
         if not text[line_start:tok.start_pos].strip() and line_start > self.items[0][2].start_pos:
             # The operand starts a line: most likely the previous clause lacks its '.'.
@@ -858,6 +863,9 @@ def _expected_text(expected: set[str]) -> str:
         return "expected the end of the text after '.'"
     names = [_CLOSERS.get(x, x.lower()) for x in sorted(expected)]
     return "expected " + " or ".join(f"'{n}'" if len(n) == 1 else n for n in names)
+
+
+_RATIONAL_TAIL = re.compile(r"r[0-9]")
 
 
 def _lark_error(e: UnexpectedInput, text: str, filename: str, start: str) -> SLRSyntaxError:

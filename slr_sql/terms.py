@@ -1039,11 +1039,11 @@ class _Writer:
     """
 
     __slots__ = ("out", "last", "quoted", "deadline", "limit", "float_text", "numbervars",
-                 "escapes", "var_names")
+                 "escapes", "var_names", "ignore_ops")
 
     def __init__(self, quoted: bool, deadline: float | None = None, limit: int | None = None,
                  message: bool = False, numbervars: bool = False, escapes: bool = True,
-                 var_names: Callable[["Var"], str] | None = None):
+                 var_names: Callable[["Var"], str] | None = None, ignore_ops: bool = False):
         self.out: list[str] = []
         self.last = ""  # last character written
         self.quoted = quoted
@@ -1053,6 +1053,7 @@ class _Writer:
         self.numbervars = numbervars
         self.escapes = escapes
         self.var_names = var_names
+        self.ignore_ops = ignore_ops
 
     def put(self, s: str) -> None:
         if not s:
@@ -1164,12 +1165,14 @@ class _Writer:
             todo.append((_LIST_REST, args[1]))
             todo.append((args[0], _ARG_PRIORITY, False))
             return
-        if n == 1 and name == "{}":
+        if self.ignore_ops:
+            pass   # every other compound in its canonical form, name(arg, ...)
+        elif n == 1 and name == "{}":
             put("{")
             todo.append((_PUT, "}"))
             todo.append((args[0], 1200, False))
             return
-        if n == 2 and name in INFIX_OPS:
+        elif n == 2 and name in INFIX_OPS:
             p, lp, rp = INFIX_OPS[name]
             if p > prec:
                 put("(")
@@ -1185,7 +1188,7 @@ class _Writer:
                 todo.append((_PUT, format_atom(name, self.quoted, self.escapes)))
             todo.append((args[0], lp, True))
             return
-        if n == 1 and name in PREFIX_OPS and name not in ("|", ","):
+        elif n == 1 and name in PREFIX_OPS and name not in ("|", ","):
             p, ap = PREFIX_OPS[name]
             open_ = p > prec
             if open_:
@@ -1239,7 +1242,7 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
                 deadline: float | None = None, limit: int | None = None,
                 message: bool = False, numbervars: bool = False,
                 char_escapes: bool = True, var_names: Callable[[Var], str] | None = None,
-                cycle_names: bool = True) -> str:
+                cycle_names: bool = True, ignore_ops: bool = False) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
 
     A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
@@ -1255,7 +1258,8 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     ``var_names`` gives the text of an unbound variable (default: its name;
     :func:`prolog_var_name` as Prolog's write/1 writes one), but for the ``S_k`` of a cyclic
     term's factorization unless ``cycle_names`` is false (SWI-Prolog's write/1 and format/2
-    write ``S_1``, its term_to_atom/2 a variable's ``_123``).
+    write ``S_1``, its term_to_atom/2 a variable's ``_123``); ``ignore_ops`` writes every
+    compound but a list in its canonical form, ``name(arg, ...)`` (write_canonical/1).
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -1267,7 +1271,7 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     >>> format_term(Struct("-", (Struct("$VAR", (27,)),)), numbervars=True)
     '-B1'
     """
-    w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names)
+    w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names, ignore_ops)
     try:
         w.write(t, priority)
     except _CyclicTerm:
@@ -1275,7 +1279,8 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
         if var_names is not None and cycle_names:
             labels = {id(deref(pair.args[0])) for pair in list_items(factorized.args[1])[0]}
             var_names = (lambda names: lambda v: v.name if id(v) in labels else names(v))(var_names)
-        w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names)
+        w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names,
+                    ignore_ops)
         w.write(factorized, priority)
     return "".join(w.out)
 

@@ -34,6 +34,8 @@ def test_goal_set_follows_rules_and_event_goals():
         {("color", 2), ("obj", 3), ("seg", 2), ("old", 1)}
     assert goal_set(p, "X = 1") == set()
     assert not goal_set(p, "red(X)").unknown
+    # with_output_to/2 runs its goal (a synchronized query waits for what it reads)
+    assert goal_set(p, "with_output_to(string(S), fresh(X))") == {("seg", 2), ("old", 1)}
 
 
 def test_prev_and_next_read_stored_events_only():

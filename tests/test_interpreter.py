@@ -508,6 +508,32 @@ def test_a_program_may_define_its_own_ordsets_predsort_and_text_predicates(kb):
     assert kb.query("ord_subtract([a, b], [a], D)") == [{"D": [Atom("b")]}]
 
 
+def test_a_program_may_define_its_own_output_lambda_and_text_predicates(kb):
+    # the predicates added with with_output_to/2 are the library's too: a store whose program
+    # defined one of them before slr_sql had it keeps opening, with its definition
+    kb.load("with_output_to(_, mine). write(_, mine). print(_, mine). writeq(_, mine). "
+            "write_canonical(_, mine). writeln(_, mine). nl(mine). tab(_, mine). "
+            "sformat(_, _, mine). sformat(_, mine). numbervars(_, _, mine). "
+            "text_to_string(_, mine). '>>'(_, mine). max_member(_, _, mine). "
+            "print_message(_, mine).")
+    assert kb.query("with_output_to(string(S), M)") == [{"M": Atom("mine")}]
+    assert kb.query("write(user_error, M), print(a, M), writeq(a, M), write_canonical(a, M), "
+                    "writeln(a, M), nl(M), tab(a, M)") == [{"M": Atom("mine")}]
+    assert kb.query("sformat(a, b, M), sformat(a, M), numbervars(a, b, M), "
+                    "text_to_string(a, M), '>>'(a, M), max_member(a, b, M), print_message(a, M)") == \
+        [{"M": Atom("mine")}]
+
+
+def test_print_message_writes_its_line_to_the_standard_error(kb, capsys):
+    capsys.readouterr()
+    assert kb.query('with_output_to(string(S), (write(a), print_message(warning, '
+                    'format("~w is late", [cup1])), print_message(silent, x))), '
+                    'print_message(error, oops)') == [{"S": "a"}]
+    out = capsys.readouterr()
+    assert out.err == "Warning: cup1 is late\nERROR: Unknown message: oops\n"
+    assert out.out == ""
+
+
 def test_ordered_sets_of_proper_lists_are_merged_in_one_step(kb):
     # ord_union/3, ord_subtract/3, ord_intersection/3 and ord_memberchk/2 of proper lists (and
     # an unbound result) take one pass in Python, not an inference per element

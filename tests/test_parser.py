@@ -1031,3 +1031,11 @@ def test_the_radix_table_is_swi_prologs(tmp_path):
     """Where ``swipl`` is installed it reads the table's texts as it says."""
     if shutil.which("swipl"):
         assert dict(zip(RADIX, _swi_reads(list(RADIX), tmp_path))) == RADIX
+
+
+@pytest.mark.parametrize("text", ["X is 1r3", "X = f(2r7)", "p(10r4)."])
+def test_a_rational_number_is_refused_as_such(text):
+    """SWI-Prolog 9 reads 1r3 as the rational number 1/3; slr_sql has no rationals, and says
+    so rather than "operator expected"."""
+    with pytest.raises(SLRSyntaxError, match="rational numbers such as 1r3 are not supported"):
+        parse_program(text) if text.endswith(".") else parse_term(text)

@@ -186,6 +186,21 @@ def test_fallback_effects_and_unknown_predicates():
         kb.query("nope(X)")
 
 
+@pytest.mark.parametrize("goal", ["item(X)^_, write(user_output, X), nl(user_output)",
+                                  "item(X)^_, print(user_output, X), tab(user_output, 1)",
+                                  "item(X)^_, writeln(user_output, X)"])
+def test_output_to_a_stream_alias_runs_in_the_interpreter(capsys, goal):
+    """write/2 & co. have effects as write/1 has: a statement would write each once for its
+    guard and once more for its rows, all of one goal before the next (1 2 then the line
+    breaks), where Prolog writes in the order of the solutions."""
+    kb = fallback_kb()
+    assert engine(kb, goal).startswith("interpreter")
+    capsys.readouterr()
+    kb.query(goal)
+    expected = {"nl": "i1\ni2\n", "tab": "i1 i2 ", "writeln": "i1\ni2\n"}
+    assert capsys.readouterr().out == next(v for k, v in expected.items() if k in goal)
+
+
 def test_reverse_of_a_list_known_when_reached_compiles():
     # (only a partial list enumerates: a stored list, or one with stored elements, is one
     # answer of a deterministic call inside the statement)

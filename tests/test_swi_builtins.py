@@ -840,6 +840,273 @@ GOALS = [
     'sort(L, [a])',
 ]
 
+# Output into text and lambdas, found by a differential probe of what a rule over events
+# writes: with_output_to/2 (its sinks, a goal run as once/1 whose output a failure or an
+# error drops, nested captures, the sink checked before the goal), format/3's difference-list
+# sinks and stream aliases, write/2 & co. with a stream alias, sformat/2,3, numbervars/3,
+# write_canonical/1 (no operators, variables named by occurrence), library(yall)'s `>>` and
+# `/` lambdas (a copy of the lambda per call, `{Free}` shared; SWI-Prolog's errors, the body
+# qualified user:Body as its meta-predicate expansion does) and max_member/3, min_member/3
+OUTPUT_AND_LAMBDA_GOALS = [
+    'with_output_to(string(S), write(hello))',
+    'with_output_to(atom(A), (write(a), write(1)))',
+    'with_output_to(codes(C), write(ab))',
+    'with_output_to(codes(C, T), write(ab))',
+    "with_output_to(codes(C, [0'y]), write(x))",
+    'with_output_to(chars(C), write(ab))',
+    'with_output_to(chars(C, T), write(ab))',
+    'with_output_to(string(S), print([1,2]))',
+    "with_output_to(string(S), writeq('A b'))",
+    'with_output_to(string(S), format("~w-~w", [a, b]))',
+    'with_output_to(string(S), (member(X, [a,b]), write(X)))',
+    'with_output_to(string(S), (member(X, [a,b]), write(X), X == b))',
+    'with_output_to(string(S), fail)',
+    'with_output_to(string(S), (write(a), throw(b)))',
+    'catch(with_output_to(string(S), (write(a), throw(b))), B, true)',
+    'catch(with_output_to(string(S), (write(a), throw(b))), B, with_output_to(string(S2), write(c)))',
+    'with_output_to(string(S), (write(a), with_output_to(string(S2), write(b)), write(c)))',
+    'with_output_to(string(S), (with_output_to(string(S2), (write(b), fail)) ; write(c)))',
+    'with_output_to(string(S), \\+ (write(x), fail))',
+    'findall(S, (member(X, [1,2]), with_output_to(string(S), write(X))), L)',
+    'with_output_to(string(S), forall(member(X, [1,2]), write(X)))',
+    'with_output_to(string(S), findall(X, (member(X, [1,2]), write(X)), L))',
+    'with_output_to(string(S), (X = 1 ; X = 2))',
+    'with_output_to(string(S), !)',
+    'with_output_to(string(a), write(x))',
+    'with_output_to(string("x"), write(x))',
+    'with_output_to(atom(x), write(x))',
+    'with_output_to(foo, write(x))',
+    'with_output_to(_, write(x))',
+    'with_output_to(string(S), _)',
+    'with_output_to(string(S), 1)',
+    'with_output_to(string(S), undefined_pred)',
+    'with_output_to(foo, 1)',
+    'with_output_to(1, true)',
+    'with_output_to("s", true)',
+    'with_output_to(atom(a, b), true)',
+    'with_output_to(codes(C, T, U), true)',
+    'with_output_to(user_input, true)',
+    'catch(with_output_to(string(S), undefined_pred), E, true)',
+    'catch(with_output_to(string(S), 1), E, true)',
+    'catch(with_output_to(foo, true), E, true)',
+    'with_output_to(string(S), (nl, tab(2), write(x)))',
+    'with_output_to(string(S), write_canonical(f(X, Y, X, - 1, 1 - 2, {a}, [a|T], \'A\', "s")))',
+    "with_output_to(string(S), write_canonical('$VAR'(1)))",
+    "with_output_to(string(S), print('$VAR'(1)))",
+    'with_output_to(string(S), writeq(f(\'A\', "s", \'b c\', [1])))',
+    'with_output_to(string(S), writeln(x))',
+    'numbervars(f(X), a, E)',
+    'numbervars(f(X), _, E)',
+    'numbervars(f(X), 0, 5)',
+    'format(codes(C, T), "~w", [x])',
+    'format(chars(C, T), "x~w", [y])',
+    'format(codes(C), "~w", [x])',
+    'format(foo, "ab", [])',
+    'format(_, "ab", [])',
+    'format(atom(a, b), "x", [])',
+    'format(foo(x), "x", [])',
+    'format(1, "x", [])',
+    'format(user_input, "x", [])',
+    'sformat(S, "ab~w", [c])',
+    'sformat(S, "ab")',
+    'sformat(S, "~w")',
+    'sformat(S, f(x), [])',
+    'write(foo, x)',
+    'write(_, x)',
+    'write(1, x)',
+    'write(f(x), x)',
+    'write(user_input, x)',
+    'nl(foo)',
+    'tab(foo, 1)',
+    'writeq(foo, x)',
+    'print(1, x)',
+    'maplist([X,Y]>>(Y is X*2), [1,2,3], L)',
+    'maplist([X]>>atom(X), [a,b])',
+    'maplist([X]>>atom(X), [a,1])',
+    'N = 3, maplist([X,Y]>>(Y is X*N), [1,2], L)',
+    'foldl([X,A0,A]>>(A is A0+X), [1,2,3], 0, S)',
+    'F = [X]>>(X > 1), call(F, 2)',
+    'call([X,Y]>>(Y is X + 1), 1, R)',
+    'call([X]>>true, 1)',
+    'maplist([X]>>(Y = X), [1]), var(Y)',
+    'call(/(Z, [X]>>(X = Z)), 5), var(Z)',
+    'call({Z}/[X]>>(X = Z), 5)',
+    'call({Z}/[X]>>(X = Z), 5), Z == 5',
+    'call({}/[X]>>(X = Z), 5)',
+    'call([X]>>foo(X), 1)',
+    'call([X, Y]>>true, 1)',
+    'call([X]>>true, 1, 2)',
+    'call([X]>>format(atom(A), X, []), "ab")',
+    'call([X]>>atom_length(X), abc, L)',
+    'call(_>>true, 1)',
+    'call(a>>true, 1)',
+    'call([X|T]>>true, 1)',
+    'call(foo/[X]>>true, 1)',
+    'call(_/[X]>>true, 1)',
+    '{X}/member(X-_, [1-a, 2-b])',
+    'setof(X, {X}/member(X-_, [2-a, 1-b]), L)',
+    'call({X}/member(X), [a])',
+    'call(foo/member(X), [a])',
+    "'>>'([X], atom(X), a)",
+    "'>>'([], true)",
+    "'>>'([X], true)",
+    'include([X]>>(X > 1), [1,2,3], L)',
+    'exclude([X]>>(X > 1), [1,2,3], L)',
+    'partition([X]>>(X < 2), [1,2,3], I, E)',
+    'predsort([O, A, B]>>compare(O, A, B), [c, a, b], L)',
+    'maplist([X-Y, Y]>>true, [a-1, b-2], L)',
+    'maplist([X, Y]>>(Y = X-X), [a, b], L)',
+    'maplist([X]>>(\\+ X = a), [b, c])',
+    'call([X]>>(X = 1 ; X = 2), R)',
+    'findall(R, call([X]>>(X = 1 ; X = 2), R), L)',
+    'call([X]>>(!, X = 1 ; X = 2), R)',
+    'max_member(@=<, M, [3,1,4])',
+    'min_member(@=<, M, [3,1,4])',
+    'max_member([X,Y]>>(X @=< Y), M, [3,1,4])',
+    'max_member(@=<, M, [])',
+    'max_member(@=<, M, L)',
+    'max_member(@=<, M, [a|b])',
+    'max_member(@=<, M, [a|_])',
+    'min_member(@=<, M, foo)',
+    'max_member(foo, M, [a, b])',
+    'max_member(@=<, M, [1, a, "s"])',
+    'catch(max_member(@=<, M, [a|b]), E, true)',
+    'catch(max_member(@=<, M, foo), E, true)',
+    'findall(A-E, (T = f(X, Y, X), numbervars(T, 0, E), format(atom(A), "~w ~q ~p", [T, T, T])), L)',
+    'findall(A-E, (T = f(X, Y), numbervars(T, 23, E), with_output_to(string(A), print(T))), L)',
+    'findall(E, numbervars(f(X, Y), 0, E), L)',
+    'with_output_to(string(S), write_canonical(f(X, W, Y, Y, X, Z, Z, - (1), - a, 1 - 2, {a, b}, [1, 2|T], (a :- b), f(:-), -(-(1)), \'hello world\', "s", 0.1, -0.0, \'$VAR\'(3), [])))',
+    # terms as print/1 and write/1 write them, and format/2 going on from the column the
+    # captured output has reached (its ~N| stops; ~N+ from the line's start until a stop)
+    'with_output_to(string(S), print(a- -1))',
+    'with_output_to(string(S), print(1 - (-1)))',
+    'with_output_to(string(S), print(-(-(1))))',
+    'with_output_to(string(S), print(f(-)))',
+    'with_output_to(string(S), print(-(a)))',
+    'with_output_to(string(S), print(- - a))',
+    'with_output_to(string(S), print(1+2+3))',
+    'with_output_to(string(S), print(1-(2-3)))',
+    'with_output_to(string(S), print(2^3^4))',
+    'with_output_to(string(S), print(-(2)^2))',
+    'with_output_to(string(S), print((-2)^2))',
+    'with_output_to(string(S), print(- 2^2))',
+    'with_output_to(string(S), print(f(a=b, (c,d))))',
+    'with_output_to(string(S), print([a=b, (a:-b)]))',
+    'with_output_to(string(S), print((a:-b;c->d)))',
+    'with_output_to(string(S), print(a:b:c))',
+    'with_output_to(string(S), print(f(;)))',
+    "with_output_to(string(S), print(f('|')))",
+    "with_output_to(string(S), print('|'(a,b)))",
+    "with_output_to(string(S), print(f(',')))",
+    'with_output_to(string(S), print(1.0e100))',
+    'with_output_to(string(S), print(1.0e-5))',
+    'with_output_to(string(S), print(100000000000000.0))',
+    'with_output_to(string(S), print(1000000000000000.0))',
+    'with_output_to(string(S), print(-0.0))',
+    'with_output_to(string(S), print(123456789012345678901234567890))',
+    'with_output_to(string(S), print("it\'s \\"q\\""))',
+    "with_output_to(string(S), print('it''s'))",
+    'with_output_to(string(S), write("it\'s \\"q\\""))',
+    'with_output_to(string(S), print(f(a, "b", \'C\', _)))',
+    'with_output_to(string(S), print(- (1)))',
+    'with_output_to(string(S), print(-(1.5)))',
+    'with_output_to(string(S), print(1 + -1.5))',
+    'with_output_to(string(S), print(a * (b + c)))',
+    'with_output_to(string(S), print((a , b) * c))',
+    'with_output_to(string(S), print(\\+ (a, b)))',
+    'with_output_to(string(S), print(f(\\+)))',
+    'with_output_to(string(S), print([-]))',
+    'with_output_to(string(S), print(- [1]))',
+    'with_output_to(string(S), print(-(a, b)))',
+    'with_output_to(string(S), print({a}))',
+    "with_output_to(string(S), print('{}'))",
+    'with_output_to(string(S), print(f(a)^b))',
+    'with_output_to(string(S), print(seg(cup1, [0.4, 0.1])^12.5))',
+    'with_output_to(string(S), print(pose([1,2,3],[0,0,0,1])))',
+    'with_output_to(string(S), print(1 rdiv 2))',
+    'with_output_to(string(S), print(a mod b))',
+    'with_output_to(string(S), print(mod(a)))',
+    'with_output_to(string(S), print(dynamic a))',
+    'with_output_to(string(S), print((:- dynamic a)))',
+    'with_output_to(string(S), print(?- a))',
+    'with_output_to(string(S), print(f(:- a)))',
+    'with_output_to(string(S), print([a|[]]))',
+    "with_output_to(string(S), print('hello'(world)))",
+    "with_output_to(string(S), print('Hello'(world)))",
+    'with_output_to(string(S), print([]))',
+    "with_output_to(string(S), print('\\t'))",
+    "with_output_to(string(S), print('a\\\\b'))",
+    'with_output_to(string(S), print(f(x,Y,_Z)))',
+    'with_output_to(string(S), write(f(x,Y,_Z)))',
+    'with_output_to(string(S), print(1.5NaN))',
+    'X is inf, with_output_to(string(S), print(X))',
+    'X is -inf, with_output_to(string(S), print(f(X)))',
+    'with_output_to(string(S), format("~a~t~10|~w~n", [name, value]))',
+    'with_output_to(string(S), format("~2f ~e ~g", [2.5, 2.5, 2.5]))',
+    'with_output_to(string(S), format("~p", [[1, \'A\']]))',
+    'with_output_to(string(S), format("~q ~a", [\'A\', \'A\']))',
+    'with_output_to(string(S), (format("a"), format("~w", b)))',
+    'with_output_to(string(S), format("~s", [[104, 105]]))',
+    'with_output_to(string(S), format("~d", [10]))',
+    'with_output_to(string(S), format("~t~w~10||", [right]))',
+    'with_output_to(string(S), format("~`-t~40|~n"))',
+    'with_output_to(string(S), format("~w ~w", [a]))',
+    'with_output_to(string(S), format("~c~c", [104, 105]))',
+    'with_output_to(string(S), format("~8|~a", [x]))',
+    'with_output_to(string(S), format("abc~tdef~20|"))',
+    'with_output_to(string(S), (write(a), format("~t~w~10|", [b])))',
+    'with_output_to(string(S), (write(abc), format("~t~w~10|", [b])))',
+    'with_output_to(string(S), (write(abc), nl, format("~t~w~10|", [b])))',
+    'with_output_to(string(S), (write(ab), format("~w~t~6|~w", [c, d])))',
+    'with_output_to(string(S), (tab(3), format("~w~t~6|~w", [c, d])))',
+    'with_output_to(string(S), (format("ab"), format("~t~w~6|", [c])))',
+    'with_output_to(string(S), (write(\'ab\\tc\'), format("~t~w~12|", [x])))',
+    'with_output_to(string(S), (write(\'ab\\nc\'), format("~t~w~4|", [x])))',
+    'with_output_to(string(S), (write(abc), format("~w~t~2|~w", [x, y])))',
+    'with_output_to(string(S), (write(a), format("~t~w~5+", [x])))',
+    'with_output_to(string(S), (write(abcdef), nl, format("~t~w~5|", [x])))',
+    'with_output_to(string(S), (write(a), with_output_to(string(T), format("~t~w~5|", [x])), write(T)))',
+    'with_output_to(string(S), (write(a), format("~t~w~5+~t~w~3+", [x, y])))',
+    'format(atom(A), "~w~t~+~w~t~+~w", [a, b, c])',
+    # a capture under control constructs, catch/3, the collecting builtins and lambdas
+    'with_output_to(string(S), (catch((write(a), throw(x)), _, write(b)), write(c)))',
+    'with_output_to(string(S), (catch(with_output_to(string(T), (write(a), throw(x))), _, write(b)), write(c)))',
+    'with_output_to(string(S), \\+ \\+ write(a))',
+    'with_output_to(string(S), forall(member(X, [a, b]), (write(X), nl)))',
+    'with_output_to(string(S), (between(1, 3, X), write(X), X >= 2))',
+    'with_output_to(string(S), aggregate_all(count, (member(X, [a, b]), write(X)), N))',
+    'with_output_to(string(S), (write(a) -> write(b) ; write(c)))',
+    'with_output_to(string(S), (fail -> write(b) ; write(c)))',
+    'with_output_to(string(S), (member(X, [1,2]) *-> write(X) ; write(none)))',
+    "with_output_to(string(S), maplist([X]>>(write(X), write(' ')), [a, b, c]))",
+    'with_output_to(string(S), forall(nth1(I, [a, b], E), format("~w: ~w~n", [I, E])))',
+    'length(L, 2), with_output_to(string(S), print(L))',
+    'with_output_to(string(S), print(f(_A, _B, _A)))',
+    'maplist([X, Y]>>format(atom(Y), "<~w>", [X]), [a, b], L)',
+    'maplist([X, Y]>>with_output_to(string(Y), print(X)), [a, "b", \'C\'], L)',
+    'foldl([X, A0, A]>>(with_output_to(string(S), write(X)), string_concat(A0, S, A)), [a, b, c], "", R)',
+    'findall(S, (member(X, [1, 2]), with_output_to(string(S), (Y is X * 2, write(Y)))), L)',
+    'aggregate_all(bag(S), (member(X, [b, a]), with_output_to(string(S), write(X))), L)',
+    # print_message/2 succeeds (its line goes to the standard error, never into a capture)
+    'print_message(error, format("hello ~w", [x]))',
+    'print_message(warning, foo)',
+    'print_message(informational, foo)',
+    'print_message(silent, foo)',
+    'print_message(foo, bar)',
+    'print_message(_, bar)',
+    'print_message(error, format("~w ~w", [x]))',
+    'print_message(error, format(f(x), []))',
+    'with_output_to(atom(A), print_message(error, x))',
+    'catch(print_message(_, bar), error(E, _), true)',
+]
+
+
+@pytest.mark.parametrize("goal", OUTPUT_AND_LAMBDA_GOALS)
+def test_output_into_text_and_lambdas_answer_as_swipl(swipl, goal):
+    example = swidiff.builtin_example(goal)
+    assert swidiff.check_example(example, swipl.run(example[2])) is not swidiff.DISCARDED
+
+
 # Text arguments as SWI-Prolog 9 reads each builtin's: which of atoms, strings, numbers
 # and code or character lists it takes (a mixed list's first element says which kind it
 # is; [] the empty text where lists are text), and which error the others raise
@@ -921,6 +1188,45 @@ TEXT_GOALS = [
     'catch(atom_to_term(A, T, B), E, true)', 'catch(atom_to_term(f(x), T, B), E, true)',
     "catch(atom_to_term('f(X)', T, foo), E, true)",
     "atom_to_term('X + Y * 2', T, B), B = [_=1, _=2], V is T",
+    # text_to_string/2: no number in; a string unified as it is, else a given result
+    # compared as text (a list and a number too)
+    'text_to_string(hello, S)',
+    'text_to_string("s", S)',
+    'text_to_string([104,105], S)',
+    'text_to_string([h,i], S)',
+    'text_to_string([], S)',
+    'text_to_string(12, S)',
+    'text_to_string(f(x), S)',
+    'text_to_string(X, S)',
+    'text_to_string(X, "ab")',
+    'text_to_string(ab, "ab")',
+    'text_to_string(ab, ab)',
+    'text_to_string(ab, "x")',
+    'text_to_string([a|_], S)',
+    "text_to_string([0'a, b], S)",
+    'text_to_string(1.5, S)',
+    'text_to_string(X, ab)',
+    'text_to_string(ab, 1)',
+    'text_to_string(ab, [a, b])',
+    'text_to_string(ab, [97, 98])',
+    'text_to_string([], [])',
+    "text_to_string('', [])",
+    'text_to_string("", "")',
+    'text_to_string([a|b], S)',
+    'text_to_string(ab, f(x))',
+    'catch(text_to_string(12, S), E, true)',
+    'catch(text_to_string(X, S), E, true)',
+    'text_to_string(ab, [a|_])',
+    'text_to_string(ab, [f(x)])',
+    'text_to_string(ab, [a|b])',
+    "text_to_string(ab, [0'a, b])",
+    "text_to_string('12', 12)",
+    'text_to_string("", [])',
+    'text_to_string("ab", ab)',
+    'text_to_string("ab", [a,b])',
+    'text_to_string("12", 12)',
+    'text_to_string([a], a)',
+    'text_to_string("ab", S)',
 ]
 
 
@@ -1197,6 +1503,12 @@ CONTEXT_GOALS = [f"catch({goal}, E, true)" for goal in [
     'X is "ab"',
     'X is "" + 1',
     "[1, 2] =:= []",
+    # with_output_to/2 names itself for its sink's and its goal's errors, but SWI-Prolog's
+    # C code calls the goal: an undefined one names '$c_call_prolog'/0
+    "with_output_to(foo, true)", "with_output_to(_, true)", "with_output_to(f(x), true)",
+    "with_output_to(string(S), _)", "with_output_to(string(S), 1)",
+    "with_output_to(string(S), undefined_pred)", "format(foo(x), \"x\", [])",
+    "format(foo, \"x\", [])", "write(1, x)", "nl(foo)", "numbervars(f(X), a, E)",
 ]]
 
 
@@ -1354,6 +1666,38 @@ def test_text_builtins_over_stored_values_answer_as_swipl_on_both_paths(swipl, b
 
 
 
+# Output into text and lambdas over stored values, on both backends and both paths (they run
+# in the interpreter, beside a compiled event goal): SWI-Prolog's answers for the same values
+STORED_OUTPUT_GOALS = {
+    "v(X)^_, with_output_to(string(S), print(X))": "member(X, VS), with_output_to(string(S), print(X))",
+    'v(X)^_, format(atom(A), "~q~t~w~20|", [X, X])': 'member(X, VS), format(atom(A), "~q~t~w~20|", [X, X])',
+    "findall(S, (v(X)^_, with_output_to(string(S), write_canonical(f(X, _, - X)))), L)":
+        "findall(S, (member(X, VS), with_output_to(string(S), write_canonical(f(X, _, - X)))), L)",
+    'findall(S, v(X)^_, Xs), maplist([Y, Z]>>format(string(Z), "<~w>", [Y]), Xs, L)':
+        'findall(S, member(X, VS), Xs), maplist([Y, Z]>>format(string(Z), "<~w>", [Y]), Xs, L)',
+    "v(X)^_, text_to_string(X, S)": "member(X, VS), text_to_string(X, S)",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(STORED_OUTPUT_GOALS))
+def test_output_into_text_over_stored_values_answers_as_swipl_on_both_paths(swipl, backend, goal):
+    import slr_sql
+
+    # (no numbers: text_to_string/2 takes none)
+    values = [v for v in STORED_TEXT_VALUES if v not in ("12", "-1.5")]
+    swi_goal = STORED_OUTPUT_GOALS[goal].replace("VS", f"[{', '.join(values)}]")
+    _, _, swi, [(_, _, names)] = swidiff.builtin_example(swi_goal)
+    theirs = swipl.run(swi)[0]
+    assert theirs["error"] is None and theirs["answers"]
+    expected = [swidiff.swi_answer(a, names) for a in theirs["answers"]]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(100)) as kb:
+        kb.add_many([f"v({v})^{i}" for i, v in enumerate(values, 1)])
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            answers = [swidiff.slr_answer(a, names) for a in kb.query(goal)]
+            assert answers == expected, (compiled, kb.explain(goal))
+
+
 # aggregate_all(max(X-W), ..) and min(X-W): slr_sql's witness form answers as the library's
 # max(X, W) and min(X, W) do (the first X must be a number; the first strictly better X wins;
 # each solution compared as it comes), so SWI-Prolog's answer to the X, W form is the oracle.
@@ -1383,3 +1727,66 @@ def test_a_raw_newline_inside_quotes_reads_as_in_swipl(swipl, goal):
     _, _, swi, queries = swidiff.builtin_example(goal)
     example = (RAW_NEWLINE_PROGRAM, [], RAW_NEWLINE_PROGRAM + swi, queries)
     assert swidiff.check_example(example, swipl.run(example[2])) is not swidiff.DISCARDED
+
+
+# What slr_sql does not support of SWI-Prolog (docs/language.md, "Not supported"): each an
+# error that names it, never an answer SWI-Prolog would not give
+NOT_SUPPORTED = {
+    "assert(f(1))": "existence_error(procedure,assert/1)",
+    "asserta(f(1))": "existence_error(procedure,asserta/1)",
+    "assertz(f(1))": "existence_error(procedure,assertz/1)",
+    "retract(f(1))": "existence_error(procedure,retract/1)",
+    "nb_setval(k, 1)": "existence_error(procedure,nb_setval/2)",
+    "b_setval(k, 1)": "existence_error(procedure,b_setval/2)",
+    "nb_getval(k, V)": "existence_error(procedure,nb_getval/2)",
+    "op(700, xfx, ===)": "existence_error(procedure,op/3)",
+    "current_op(P, T, is)": "existence_error(procedure,current_op/3)",
+    "setup_call_cleanup(true, true, true)": "existence_error(procedure,setup_call_cleanup/3)",
+    "call_cleanup(true, true)": "existence_error(procedure,call_cleanup/2)",
+    "portray_clause(x)": "existence_error(procedure,portray_clause/1)",
+    "write_term(x, [])": "existence_error(procedure,write_term/2)",
+    "write_term(user_output, x, [])": "existence_error(procedure,write_term/3)",
+    "read(X)": "existence_error(procedure,read/1)",
+    "read_term(X, [])": "existence_error(procedure,read_term/2)",
+    "get_char(C)": "existence_error(procedure,get_char/1)",
+    "read_term_from_atom(a, T, [])": "existence_error(procedure,read_term_from_atom/3)",
+    "aggregate(count, true, C)": "existence_error(procedure,aggregate/3)",
+    "list_to_assoc([], A)": "existence_error(procedure,list_to_assoc/2)",
+    "apply(true, [])": "existence_error(procedure,apply/2)",
+    "X is 5 rdiv 2": "type_error(evaluable,(rdiv)/2)",
+    "X is rational(0.5)": "type_error(evaluable,rational/1)",
+    "X is rationalize(0.5)": "type_error(evaluable,rationalize/1)",
+    "X is lcm(4, 6)": "type_error(evaluable,lcm/2)",
+    "maplist(\\X^true, [1])": "existence_error(procedure,(\\)/2)",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(NOT_SUPPORTED))
+def test_what_is_not_supported_is_an_error_naming_it(goal):
+    import re
+    from pathlib import Path
+
+    import slr_sql
+    from slr_sql.errors import SLREvaluationError
+
+    with slr_sql.open(clock=slr_sql.ManualClock(0)) as kb:
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            with pytest.raises(SLREvaluationError) as raised:
+                kb.query(goal)
+            assert str(raised.value.term.args[0]) == NOT_SUPPORTED[goal]
+    # and the page of the builtins lists it
+    name_arity = re.search(r",\(?(.+?)\)?/(\d)\)$", NOT_SUPPORTED[goal])
+    page = (Path(__file__).parent.parent / "docs" / "language.md").read_text(encoding="utf-8")
+    section = page[page.index("### Not supported"):page.index("## The robot library")]
+    name, arity = name_arity.group(1), name_arity.group(2)
+    assert re.search(rf"`\(?{re.escape(name)}\)?/[0-9,]*{arity}", section), (name, arity)
+
+
+@pytest.mark.parametrize("text", ["X = 1r3", "X = `abc`"])
+def test_unsupported_syntax_says_what_it_is(text):
+    import slr_sql
+
+    with slr_sql.open(clock=slr_sql.ManualClock(0)) as kb, \
+            pytest.raises(slr_sql.SLRSyntaxError, match="not supported"):
+        kb.query(text)

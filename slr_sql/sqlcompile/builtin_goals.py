@@ -30,6 +30,9 @@ NO_BIND = frozenset([
 EFFECTS = frozenset([
     ("write", 1), ("print", 1), ("writeq", 1), ("write_canonical", 1), ("writeln", 1),
     ("nl", 0), ("tab", 1), ("format", 1), ("format", 2), ("format", 3), ("halt", 0),
+    # the same to a stream alias (the library's write(user_error, X), ...)
+    ("$write_to", 2), ("$print_to", 2), ("$writeq_to", 2), ("$write_canonical_to", 2),
+    ("$writeln_to", 2), ("$nl_to", 1), ("$tab_to", 2), ("$print_message", 2),
 ])
 
 

@@ -78,5 +78,5 @@ class RuleGoals:
             return self.ite_sql(args[0], Atom("true"), Atom("fail"), ctx, nxt, st, emit)
         if key == ("ignore", 1):
             return self.ite_sql(args[0], Atom("true"), Atom("true"), ctx, nxt, st, emit)
-        raise Fallback(f"the library predicate {name}/{key[1]} (recursive or with cut) "
-                       f"has no SQL form")
+        # (recursive, with a cut, or output and text: with_output_to/2, write/2, ...)
+        raise Fallback(f"the library predicate {name}/{key[1]} has no SQL form")
