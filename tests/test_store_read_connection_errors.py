@@ -208,6 +208,24 @@ def test_the_hub_logs_a_read_of_a_dropped_journal_as_one_line(tmp_path, caplog):
         sub.close()
 
 
+def test_a_trim_of_a_journal_another_connection_dropped_is_an_slr_error(tmp_path, caplog):
+    """The hub's housekeeping lists the journals, then trims each: one another connection
+    dropped in between failed with the raw database error, which the housekeeping logged
+    with a traceback (an ERROR: "a bug of this package"); it is the SLRError a read of that
+    journal is (one WARNING line)."""
+    path = str(tmp_path / "s.db")
+    with hub_with_one_delivery(path, caplog) as (kb, hub, sub):
+        raw = sqlite3.connect(path, isolation_level=None)
+        try:
+            raw.execute("DROP TABLE slr_subj_p")
+        finally:
+            raw.close()
+        with pytest.raises(SLRError, match="no such table: slr_subj_p"):
+            kb.store.trim_journal("slr_subj_p", 1)
+        assert kb.store.subscription_rows()   # (the registry reads on)
+        sub.close()
+
+
 def test_a_reader_opened_after_a_chdir_reads_the_store(tmp_path, monkeypatch):
     """A store opened by a relative path: its reader opens the file the store has open, not
     the path in the working directory of now (no empty file made there, no error)."""

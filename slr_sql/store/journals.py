@@ -17,6 +17,7 @@ themselves are created and dropped by :meth:`Catalog.create_journal` / ``drop_jo
 from __future__ import annotations
 
 import functools
+import sqlite3
 import json
 from collections.abc import Callable, Iterable
 from typing import Any, NamedTuple
@@ -92,7 +93,14 @@ class SubscriptionTables:
         self._out = functools.partial(read_text, holds_nul=holds_nul)
 
     def _run(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
-        return self.db.execute(sql, params)
+        # (the registry's callers -- the hub's housekeeping and delivery threads among
+        # them -- expect an SLRError: a journal or registry table another connection
+        # dropped is said in words, as the journal reader says it, not as a raw
+        # database error, which their logs would print with a traceback)
+        try:
+            return self.db.execute(sql, params)
+        except sqlite3.Error as exc:
+            raise self.db.read_error(exc) from None
 
     def subscription_wanted(self, name: str, arity: int) -> bool:
         """Does an unfinished subscription (of any process) want event type name/arity?"""
