@@ -45,14 +45,16 @@ def server(tmp_path_factory):
 
 
 def test_a_server_nobody_listens_for_is_unavailable_to_requests_and_subscriptions():
-    with socket.socket() as s:                 # a port nobody listens on
+    # a port nobody listens on: bound, not listening (refused), and held meanwhile so that
+    # no other process's server can take it between the close and the requests
+    with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    with slr_sql.connect(f"http://127.0.0.1:{port}") as kb:
-        exc = _unavailable(lambda: kb.query("X = 1"))
-        assert exc.status == 0 and "cannot reach slr serve" in str(exc)
-        exc = _unavailable(lambda: kb.subscribe("p(X)^T"))
-        assert exc.status == 0 and f"cannot subscribe at ws://127.0.0.1:{port}" in str(exc)
+        with slr_sql.connect(f"http://127.0.0.1:{port}") as kb:
+            exc = _unavailable(lambda: kb.query("X = 1"))
+            assert exc.status == 0 and "cannot reach slr serve" in str(exc)
+            exc = _unavailable(lambda: kb.subscribe("p(X)^T"))
+            assert exc.status == 0 and f"cannot subscribe at ws://127.0.0.1:{port}" in str(exc)
 
 
 def test_a_503_of_the_server_is_unavailable_and_a_retry_succeeds_once_it_passes(server):

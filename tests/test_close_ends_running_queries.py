@@ -299,3 +299,75 @@ def _ignore_errors(call) -> None:
         call()
     except slr_sql.SLRError:
         pass
+
+
+def test_a_close_cancels_a_querys_statement_never_the_write_after_it(postgres_url,
+                                                                      monkeypatch):
+    """PostgreSQL: the close's cancel of a query's statement on the store's connection was
+    sent after it had looked (under its condition) that the query still ran, without
+    holding anything: the query could end meanwhile, and another thread's add -- waiting
+    for the store's lock -- take the connection, so that the cancel cut the write (a close
+    never does). Here the cancel request is held (psycopg's cancel_safe, for this store's
+    connection only) until the query has ended and the add has reached its statement, or
+    2 s: the cancel is now sent while the query's thread cannot let go of the connection.
+    (Without the fix the add reached its statement within the 2 s and was cancelled.)"""
+    import psycopg
+
+    kb, _ = _slow_store(postgres_url, signalled=False)
+    with psycopg.connect(postgres_url, autocommit=True) as admin:
+        admin.execute("SET search_path = slr")
+        admin.execute("CREATE FUNCTION slr_test_slow() RETURNS trigger LANGUAGE plpgsql "
+                      "AS $$ BEGIN PERFORM pg_sleep(1); RETURN NEW; END $$")
+        admin.execute("CREATE TRIGGER slow BEFORE INSERT ON p "
+                      "FOR EACH ROW EXECUTE FUNCTION slr_test_slow()")
+        pid = _store_pid(kb)
+        store_connection = kb.store._db.conn.raw
+        cancel_safe = psycopg.Connection.cancel_safe
+        writing = ("SELECT count(*) FROM pg_stat_activity WHERE pid = %s "
+                   "AND wait_event = 'PgSleep'")
+
+        def held_cancel(self, *args, **kwargs):
+            if self is store_connection:
+                # the query ended by another session's cancels, then (if it can) the add
+                # runs its statement on the store's connection, then the close's cancel
+                deadline = time.monotonic() + 2.0
+                while time.monotonic() < deadline and not queried.is_set():
+                    admin.execute("SELECT pg_cancel_backend(%s)", (pid,))
+                    queried.wait(0.05)
+                while time.monotonic() < deadline and \
+                        not admin.execute(writing, (pid,)).fetchone()[0]:
+                    added.wait(0.01)
+            return cancel_safe(self, *args, **kwargs)
+        monkeypatch.setattr(psycopg.Connection, "cancel_safe", held_cancel)
+
+        outcome: dict = {}
+        queried, added = threading.Event(), threading.Event()
+
+        def ask() -> None:
+            try:
+                kb.query("slow")
+            except BaseException as exc:   # (ended by the cancels)
+                outcome["query"] = exc
+            queried.set()
+
+        def add() -> None:
+            try:
+                kb.add("p(1000)^1000")
+            except BaseException as exc:   # (asserted on below)
+                outcome["add"] = exc
+            added.set()
+
+        ended = threading.Event()
+        threading.Thread(target=ask, daemon=True).start()
+        _wait_until_running(postgres_url, pid, None, ended)
+        threading.Thread(target=add, daemon=True).start()
+        closed = threading.Event()
+        threading.Thread(target=lambda: (kb.close(), closed.set()), daemon=True).start()
+        assert queried.wait(DEADLINE) and added.wait(DEADLINE) and closed.wait(DEADLINE)
+        # never cut (SLRCancelled); the close may take the store's lock before the add once
+        # the query let go of it: then the add is refused in words, and nothing is stored
+        error = outcome.get("add")
+        assert error is None or (type(error) is slr_sql.SLRError
+                                 and str(error) == "the event store is closed"), repr(error)
+        assert admin.execute("SELECT count(*) FROM p WHERE arg1 = '1000'").fetchone()[0] == \
+            (0 if error else 1)

@@ -209,10 +209,13 @@ def test_no_answer_within_the_timeout_is_an_answer_timeout_after_sending() -> No
 
 
 def test_nobody_listening_is_a_request_not_sent() -> None:
-    with socket.create_server(("127.0.0.1", 0)) as placeholder:
-        port = placeholder.getsockname()[1]      # a port that is free once this closes
-    with pytest.raises(RequestNotSent, match="refused"):
-        HttpPool(f"http://127.0.0.1:{port}", headers={}).request("GET", "/health")
+    # a port bound and not listening (refused), held meanwhile: closed first, it could be
+    # another process's server's by the time the request connects
+    with socket.socket() as placeholder:
+        placeholder.bind(("127.0.0.1", 0))
+        port = placeholder.getsockname()[1]
+        with pytest.raises(RequestNotSent, match="refused"):
+            HttpPool(f"http://127.0.0.1:{port}", headers={}).request("GET", "/health")
 
 
 def test_no_connection_within_the_connect_timeout_is_an_answer_timeout_before_sending() -> None:

@@ -29,15 +29,27 @@ def _other(url: str) -> psycopg.Connection:
     return conn
 
 
-def _cancel_when_running(admin: psycopg.Connection, pid: int) -> None:
-    """Cancel backend ``pid``'s statement once it has run for 100 ms (deadline-bounded)."""
+def _cancel_until_returned(admin: psycopg.Connection, pid: int,
+                           thread: threading.Thread) -> None:
+    """Cancel backend ``pid``'s statement once it has run for 100 ms, and again (a pause
+    doubling from 50 ms) until ``thread``'s call has returned (deadline-bounded). The server
+    shows a statement of the extended protocol active from its Parse message on, and a cancel
+    that arrives while the backend waits for the client's next message (wait_event
+    ClientRead) is discarded: one cancel sent on the sight of 'active' may be lost, and the
+    statement run on (an administrator cancels again)."""
     deadline = time.monotonic() + DEADLINE
     running = ("SELECT count(*) FROM pg_stat_activity WHERE pid = %s AND state = 'active' "
+               "AND wait_event IS DISTINCT FROM 'ClientRead' "
                "AND clock_timestamp() - query_start > interval '100 milliseconds'")
-    while not admin.execute(running, (pid,)).fetchone()[0]:
-        assert time.monotonic() < deadline, f"backend {pid} never ran a long statement"
-        time.sleep(0.01)
-    assert admin.execute("SELECT pg_cancel_backend(%s)", (pid,)).fetchone()[0] is True
+    pause = 0.05
+    while thread.is_alive():
+        assert time.monotonic() < deadline, f"backend {pid}'s statement was never cancelled"
+        if admin.execute(running, (pid,)).fetchone()[0]:
+            assert admin.execute("SELECT pg_cancel_backend(%s)", (pid,)).fetchone()[0]
+            thread.join(pause)
+            pause = min(pause * 2, 1.0)
+        else:
+            thread.join(0.01)
 
 
 def _cancelled(kb, url: str, call, detached: bool = False) -> BaseException:
@@ -56,7 +68,7 @@ def _cancelled(kb, url: str, call, detached: bool = False) -> BaseException:
     thread.start()
     try:
         with _other(url) as admin:
-            _cancel_when_running(admin, pid)
+            _cancel_until_returned(admin, pid, thread)
     finally:
         thread.join(DEADLINE)
     assert not thread.is_alive() and len(raised) == 1, raised

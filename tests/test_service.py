@@ -607,12 +607,14 @@ def test_closed_client_and_unreachable_server_are_slr_errors(server):
     kb.close()
     with pytest.raises(slr_sql.SLRError):
         kb.query("true")
-    with socket.socket() as s:                 # a port nobody listens on
+    # a port nobody listens on: bound, not listening (refused), and held meanwhile so that
+    # no other process's server can take it between the close and the request
+    with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    with slr_sql.connect(f"http://127.0.0.1:{port}") as unreachable, \
-            pytest.raises(ServiceError) as info:
-        unreachable.query("true")
+        with slr_sql.connect(f"http://127.0.0.1:{port}") as unreachable, \
+                pytest.raises(ServiceError) as info:
+            unreachable.query("true")
     assert info.value.status == 0 and "cannot reach" in str(info.value)
     with pytest.raises(slr_sql.SLRError):
         slr_sql.connect("ftp://example")

@@ -86,10 +86,12 @@ def test_a_syntax_error_through_the_url_shows_the_caret(secured):
 
 
 def test_an_unreachable_url_is_an_error_in_words():
+    # a port bound and not listening (refused), held until the command is done: closed
+    # first, another process's server could be given it meanwhile
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    r = slr("query", f"http://127.0.0.1:{port}", "true")
+        r = slr("query", f"http://127.0.0.1:{port}", "true")
     assert r.returncode == 1 and "cannot reach slr serve" in r.stderr
     assert "Traceback" not in r.stderr
 

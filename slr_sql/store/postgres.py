@@ -1603,7 +1603,9 @@ class PgDatabase:
         """(:meth:`Database.stop_queries`) The statement of a compiled query running on the
         store's connection outside a transaction is cancelled (``cancel_safe``: a request of
         its own to the server), again until it has ended -- a cancel that reaches the server
-        before the statement is lost -- and one started later is refused; the read-only
+        before the statement is lost -- each sent while the query is known to run, so that
+        it never reaches another thread's write after it; one started later is refused; the
+        read-only
         ``kb.sql`` statements running on connections of their own end too
         (:meth:`DetachedStatements.stop`). Returns once no query's statement runs on the
         store's connection."""
@@ -1614,10 +1616,16 @@ class PgDatabase:
             self.stopping = True
             running = self.query_thread
         while running is not None and running != threading.get_ident():
-            with suppress(psycopg.Error):
-                self.conn.raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
             with self.query_ended:
+                # (sent only while the query's statement is known to run, this condition
+                # held: its thread clears query_thread under it before it lets go of the
+                # store's lock, so no other statement -- another thread's write, which a
+                # close never cuts -- can be sent on the connection until the server has
+                # the cancel; one that finds the query ended is discarded by the idle
+                # backend)
                 if self.query_thread is not None:
+                    with suppress(psycopg.Error):
+                        self.conn.raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
                     self.query_ended.wait(pause)
                 running = self.query_thread
             pause = min(pause * 2, 2.0)
