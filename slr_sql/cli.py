@@ -1152,8 +1152,8 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     if fmt in ("json", "nl"):
         from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
 
-        rows = ([json_cell(v) for v in row] for row in rows)
-        for line in output_rows(rows, columns, nl=fmt == "nl", arrays=False, json_cols=False):
+        cells = ([json_cell(v) for v in row] for row in rows)
+        for line in output_rows(cells, columns, nl=fmt == "nl", arrays=False, json_cols=False):
             out.write(line + "\n")
     elif fmt in ("csv", "tsv"):
         writer = csv.writer(out, dialect="excel-tab" if fmt == "tsv" else "excel",
