@@ -1122,6 +1122,37 @@ def run_sql(db: str, statement: str, write: bool = False) -> tuple[list[str], li
 SQL_FORMATS = ("table", "csv", "tsv", "json", "nl")
 
 
+def json_cell(value: Any) -> Any:
+    """``value`` (a cell of ``kb.sql``) as ``--json`` and ``--nl`` can write it. SQLite's
+    cells are numbers, text, blobs and NULL; PostgreSQL's come as psycopg reads its types:
+    a NUMERIC (``sum`` or ``avg`` of an integer column) is a Decimal, written as the number
+    it is (an integer when it has no fractional digits, as SQLite's ``sum`` gives one),
+    and a timestamp, date, interval, uuid, range or address is written as its text.
+    JSON's writer took none of them and the command ended in a TypeError.
+
+    >>> from decimal import Decimal; import datetime
+    >>> json_cell(Decimal("190")), json_cell(Decimal("10.50")), json_cell([Decimal("1")])
+    (190, 10.5, [1])
+    >>> json_cell(datetime.date(2026, 11, 29)), json_cell(b"\\x00"), json_cell({"a": 1})
+    ('2026-11-29', b'\\x00', {'a': 1})
+    """
+    from decimal import Decimal
+
+    if value is None or isinstance(value, (bool, int, float, str, bytes)):
+        return value
+    if isinstance(value, Decimal):
+        if value.is_finite() and value.as_tuple().exponent >= 0:   # type: ignore[operator]
+            return int(value)
+        return float(value)     # (NaN and the infinities as the floats, {"$float": ...})
+    if isinstance(value, (list, tuple)):
+        return [json_cell(v) for v in value]
+    if isinstance(value, dict):   # (json and jsonb columns)
+        return {str(k): json_cell(v) for k, v in value.items()}
+    if isinstance(value, (bytearray, memoryview)):
+        return bytes(value)
+    return str(value)
+
+
 def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = None) -> None:
     """Rows in one of :data:`SQL_FORMATS`, as ``sqlite-utils query`` writes them: ``json`` a
     JSON array of row objects (one row a line), ``nl`` one JSON object a line, ``csv`` and
@@ -1143,9 +1174,8 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     if fmt in ("json", "nl"):
         from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
 
-        rows = (row if all(type(v) is not float or math.isfinite(v) for v in row)
-                else tuple(_json_float(v) for v in row) for row in rows)
-        for line in output_rows(rows, columns, nl=fmt == "nl", arrays=False, json_cols=False):
+        cells = ([_json_float(json_cell(v)) for v in row] for row in rows)
+        for line in output_rows(cells, columns, nl=fmt == "nl", arrays=False, json_cols=False):
             out.write(line + "\n")
     elif fmt in ("csv", "tsv"):
         writer = csv.writer(out, dialect="excel-tab" if fmt == "tsv" else "excel",

@@ -129,6 +129,30 @@ def test_sql_json_and_nl(store):
     assert lines[0] == {"arg1": "cup1", "arg2": "cup", "t_end": 2.0}
 
 
+@pytest.mark.parametrize("option", ["--json", "--nl"])
+def test_sql_json_writes_sums_and_averages_as_numbers_on_both_backends(backend, option):
+    # On PostgreSQL sum and avg of an integer column are NUMERICs (psycopg's Decimal), which
+    # the JSON writer refused: the command died with "TypeError: (this is a bug ...)"
+    assert slr("add", backend, "seen(a)^1", "seen(b)^2", "seen(c)^3").returncode == 0
+    r = slr("sql", backend, "SELECT count(*) AS n, sum(seq) AS total, avg(seq) AS mean, "
+            "min(t_end) AS first FROM seen", option)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout) if option == "--json" else [json.loads(r.stdout)]
+    assert rows == [{"n": 3, "total": 6, "mean": 2.0, "first": 1.0}]
+    assert type(rows[0]["total"]) is int
+
+
+def test_sql_json_writes_postgresql_values_json_has_no_type_for_as_text(postgres_url):
+    assert slr("add", postgres_url, "seen(a)^1").returncode == 0
+    r = slr("sql", postgres_url, "SELECT date '2026-11-29' AS day, '1.5'::numeric AS x, "
+            "'NaN'::numeric AS nan, ARRAY[2.5::numeric] AS xs, "
+            "'123e4567-e89b-12d3-a456-426614174000'::uuid AS id", "--nl")
+    assert r.returncode == 0, r.stderr
+    row = json.loads(r.stdout)
+    assert row["day"] == "2026-11-29" and row["x"] == 1.5 and row["xs"] == [2.5]
+    assert row["id"] == "123e4567-e89b-12d3-a456-426614174000" and row["nan"] == {"$float": "nan"}
+
+
 def test_sql_table_is_the_default_on_a_terminal_and_asked_for_in_a_pipe(store):
     assert "┃ arg1" in slr("sql", store, SELECT, "--table").stdout
     child = _spawn("sql", store, SELECT)

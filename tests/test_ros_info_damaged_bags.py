@@ -179,3 +179,16 @@ def test_ros_info_of_a_bag_whose_storage_is_damaged_says_so(tmp_path, where, sai
     assert "Traceback" not in result.stderr and "bug" not in result.stderr, result.stderr
     assert said.format(bag=bag) in result.stderr, result.stderr
     assert result.returncode == (1 if said.startswith("error") else 0)
+
+
+def test_an_mcap_file_cut_after_its_magic_is_said_to_be_cut_short(tmp_path):
+    """A file holding only MCAP's magic (a copy or download cut short): rosbags' reader reads
+    the next record's kind with ord() of nothing, and the user read "error: cannot read
+    FILE: ord() expected a character, but string of length 0 found" -- Python's words."""
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(b"\x89MCAP0\r\n")
+    for args in (("ros", "info", str(cut)), ("ros", "import", str(cut), str(tmp_path / "r.db"))):
+        result = slr(*args)
+        assert result.returncode == 1 and "Traceback" not in result.stderr
+        assert result.stderr.strip() == (f"error: cannot read {cut}: the file ends where a "
+                                         "record should begin (it is cut short)"), result.stderr

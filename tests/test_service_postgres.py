@@ -212,3 +212,22 @@ def test_a_mark_or_sql_parameter_holding_nul_is_refused_in_words(postgres_url, t
             assert "cannot hold the character U+0000" in message and "0x00" not in message
         assert HTTP.post(service.url + "/mark_complete", json={"type": "p/1", "time": 3},
                          timeout=30).json() == {"type": "p/1", "time": 3.0}
+
+
+def test_sql_over_the_service_gives_a_numeric_as_the_number_it_is(postgres_url, tmp_path):
+    """sum and avg of an integer column are NUMERICs on PostgreSQL (psycopg's Decimal): /sql
+    sent them as their text ("6"), a string where the same statement gives a number on a
+    store file and on the database directly (`slr sql URL --json`)."""
+    with ServiceProcess(postgres_url, log=tmp_path / "serve.log") as service:
+        for t in (1, 2, 3):
+            assert HTTP.post(service.url + "/add", json={"event": f"p({t})^{t}"},
+                             timeout=30).status_code == 200
+        reply = HTTP.post(service.url + "/sql", json={
+            "query": "SELECT sum(seq) AS total, avg(seq) AS mean, 'NaN'::numeric AS nan, "
+                     "12345678901234567890123::numeric AS big FROM p"}, timeout=30)
+        assert reply.status_code == 200, reply.text
+        assert reply.json()["rows"] == [[6, 2.0, {"$float": "nan"}, 12345678901234567890123]]
+        with slr_sql.connect(service.url) as remote:
+            columns, rows = remote.sql("SELECT sum(seq) AS total, avg(seq) AS mean FROM p")
+        assert list(columns) == ["total", "mean"] and [list(r) for r in rows] == [[6, 2.0]]
+        assert type(rows[0][0]) is int and type(rows[0][1]) is float

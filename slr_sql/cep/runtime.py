@@ -1590,16 +1590,21 @@ class EventRules:
         return lines
 
     def _query_plan_lines(self, alt: AltSQL, sql: str) -> list[str]:
-        """SQLite's query plan of a statement (how the indexes bound it)."""
+        """The database's query plan of a statement (how the indexes bound it): SQLite's
+        ``EXPLAIN QUERY PLAN`` steps, PostgreSQL's ``EXPLAIN`` lines (it has no ``EXPLAIN
+        QUERY PLAN``: asked that, every plan of an explained rule read as a syntax error)."""
         params = self.params(float(self.clock.now()))
         params.update(alt.params)
         params.update({f"w{p}": 0 for p in range(alt.k)})
         params.update({f"r{p}": 0 for p in range(alt.k)})
         params.update(rule="", t=0)
+        sqlite = self.store.dialect.name == "sqlite"
         try:
-            return [row[3] for row in self.store.run_compiled(query_plan(sql), params)]
+            rows = self.store.run_compiled(
+                query_plan(sql) if sqlite else "EXPLAIN (COSTS OFF) " + sql, params)
         except DatabaseError as exc:  # pragma: no cover - explain must not fail
             return [f"(no plan: {exc})"]
+        return [row[3] if sqlite else row[0] for row in rows]
 
     def explain(self, goal: str) -> tuple[bool, list[str]] | None:
         """How the event rules behind ``goal`` run: ``(True, lines)`` for a rule's text,

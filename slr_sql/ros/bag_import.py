@@ -170,6 +170,8 @@ def reader_reason(exc: BaseException) -> str:
     "a record that fails the reader's own check"
     >>> reader_reason(UnicodeDecodeError("utf-8", b"ab?", 2, 3, "invalid start byte"))
     'text that is not UTF-8 (byte 2 of a 3-byte field)'
+    >>> reader_reason(TypeError("ord() expected a character, but string of length 0 found"))
+    'the file ends where a record should begin (it is cut short)'
     """
     if isinstance(exc, UnicodeDecodeError):
         return f"text that is not UTF-8 (byte {exc.start} of a {len(exc.object)}-byte field)"
@@ -180,6 +182,10 @@ def reader_reason(exc: BaseException) -> str:
     if isinstance(exc, KeyError):
         return f"a record of a kind the reader does not know ({_short(repr(exc.args[0]))})" \
             if exc.args else "a record of a kind the reader does not know"
+    if isinstance(exc, TypeError) and str(exc).startswith("ord() expected a character"):
+        # (the MCAP reader reads a record's kind byte with ord(): at the end of the file
+        # there is none, and the user read Python's own words about ord)
+        return "the file ends where a record should begin (it is cut short)"
     text = " ".join(str(a) for a in exc.args) or type(exc).__name__
     return _short(text)
 

@@ -52,6 +52,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from decimal import Decimal
 from typing import Any
 
 import orjson
@@ -363,6 +364,9 @@ def encode_plain(value: Any) -> Any:
 
     >>> encode_plain({"now": float("-inf"), "rows": [(1, "a", None, b"\\x01")]})
     {'now': {'$float': '-inf'}, 'rows': [[1, 'a', None, {'$bytes': '01'}]]}
+    >>> from decimal import Decimal
+    >>> encode_plain([Decimal("190"), Decimal("10.50"), Decimal("NaN")])
+    [190, 10.5, {'$float': 'nan'}]
     """
     tv = type(value)
     if value is None or tv is bool or tv is int or tv is str:
@@ -380,6 +384,14 @@ def encode_plain(value: Any) -> Any:
     if isinstance(value, int):
         return int(value)
     if isinstance(value, float):
+        return encode_plain(float(value))
+    if isinstance(value, Decimal):
+        # a PostgreSQL NUMERIC (sum or avg of an integer column in /sql): the number, as
+        # SQLite gives its sum (an integer when written without fractional digits); it
+        # travelled as its text ("190"), a string where the same statement on a store file
+        # or on the database directly gives a number
+        if value.is_finite() and value.as_tuple().exponent >= 0:   # type: ignore[operator]
+            return int(value)
         return encode_plain(float(value))
     return str(value)
 
