@@ -23,6 +23,7 @@ import itertools
 import json
 import math
 
+import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 from strategy_helpers import BOOLEANS, integers, sampled
 
@@ -600,11 +601,13 @@ def arith_rules(draw):
 
 @st.composite
 def arith_streams(draw):
-    # 2**60: beyond the range SQL computes exactly (the Python fallback decides)
+    # 2**60: beyond the range SQL computes exactly (the Python fallback decides); the
+    # integers at the ends of 64 bits (SQLite's abs() of the smallest overflows)
     out = []
     for _ in range(draw(integers(2, 10))):
         s = float(draw(integers(0, 6)))
-        value = draw(sampled([0, 1, 2, 3, 1.0, 2.5, 2 ** 60, -(2 ** 60)]))
+        value = draw(sampled([0, 1, 2, 3, 1.0, 2.5, 2 ** 60, -(2 ** 60), -(2 ** 63),
+                              2 ** 63 - 1]))
         out.append((draw(sampled(["a", "b"])), (value,),
                     s, s + float(draw(sampled([0, 0, 1, 3])))))
     return out
@@ -634,6 +637,31 @@ def test_arithmetic_where_is_sql_and_bounds_the_earliest_row():
     assert "where, per candidate" not in text
     assert "slr_cep_ix__face__arg1_arg3" in text
 
+
+
+SMALLEST = -(2 ** 63)   # SQLite's abs() of it is an integer overflow error
+
+
+@pytest.mark.parametrize("where", ["X + Y > 0", "X + Y < 0", "X - Y =< 5", "Y - X >= 5",
+                                   "X - Y > 5"])
+def test_an_arithmetic_where_over_the_smallest_64_bit_integer_decides_as_prolog(backend,
+                                                                                 where):
+    # the guards that keep SQL's arithmetic to its exact range took abs() of the value: on
+    # SQLite an overflow error, so every add that decided such a rule was refused whole
+    rule = f"r(X, Y) <- a(X) seq b(Y) where {where}."
+    x, y = SMALLEST, 1
+    holds = {"X + Y > 0": x + y > 0, "X + Y < 0": x + y < 0, "X - Y =< 5": x - y <= 5,
+             "Y - X >= 5": y - x >= 5, "X - Y > 5": x - y > 5}[where]
+    clock = ManualClock(0.0)
+    with slr_sql.open(backend, clock=clock) as kb:
+        kb.load(rule)
+        assert kb.add_many([f"a({SMALLEST})^1", "a(7)^1.5", "b(1)^2"]) == []
+        clock.set(10.0)
+        got = sorted(((r["X"], r["Y"]) for r in kb.query("r(X, Y)^[_, _]")), key=repr)
+        assert [r["errors"] for r in kb.event_rules()] == [0]
+    seven = {"X + Y > 0": True, "X + Y < 0": False, "X - Y =< 5": False,
+             "Y - X >= 5": False, "X - Y > 5": True}[where]
+    assert got == sorted([(SMALLEST, 1)] * holds + [(7, 1)] * seven, key=repr)
 
 def test_arithmetic_where_on_an_evaluable_atom_is_prolog_s():
     # pi is stored as text: SQL cannot compute Y - pi, the fallback evaluates it as Prolog
