@@ -194,10 +194,8 @@ def test_events_of_one_time_and_zeros_of_two_signs_are_chosen_in_any_arrival_ord
                 "chronological": [((1, -0.0), 0.0, 2.0), ((-0.0, 0.0), 1.0, 2.0)]}[policy]
     assert cepdiff._typed(cepdiff.reference(rule, TIED_EVENTS)) == \
         sorted(cepdiff._typed(expected))
-    # (the a's in each order, the b's after them or before them, in either order)
-    for k, a_order in enumerate(itertools.permutations(range(3))):
-        b_order = [3, 4] if k % 2 else [4, 3]
-        order = list(a_order) + b_order if k < 3 else b_order + list(a_order)
+    # (the a's first or last; a(0.0) before a(-0.0) and b(0.0) before b(-0.0), or after)
+    for order in ([1, 0, 2, 3, 4], [0, 1, 2, 4, 3], [4, 3, 2, 1, 0], [3, 4, 0, 2, 1]):
         where = None if place == "sqlite" else \
             database + ("&" if "?" in database else "?") + f"schema=zt{next(_SCHEMAS)}"
         got = cepdiff.run(rule, TIED_EVENTS, order, [], False, False, where=where)
