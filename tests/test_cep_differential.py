@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 
+import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 from strategy_helpers import BOOLEANS, integers, sampled
 
@@ -133,9 +135,10 @@ def _eval_interval(tree, chosen, k, events=()):
 
 def _values(args):
     """Arguments in SQLite's order: numbers by value, then by SQL type (integer before
-    real), before text (atoms)."""
+    real), then -0.0 before 0.0 (Prolog's standard order), before text (atoms)."""
     return tuple((1, v, "text") if isinstance(v, str)
-                 else (0, v, "integer" if type(v) is int else "real") for v in args)
+                 else (0, v, "integer") if type(v) is int
+                 else (0, v, "real", math.copysign(1.0, v)) for v in args)
 
 
 def _operand(x, b):
@@ -529,6 +532,47 @@ def test_where_run_by_the_interpreter_equals_the_reference(rule, events, data):
     equals_the_reference(rule, events, data)
 
 
+
+def twin_case(rnd):
+    """A rule over a/1, b/1 and d/2 whose every argument is a variable of the head, under
+    ``recent`` or ``chronological``, and a stream where events come with twins: the same
+    type and times, each zero of the other sign -- two terms that SQL's order takes for one
+    value. Arrival in a shuffled order (rnd, not hypothesis's permutations: those shrink to
+    the list's own order, which is also the reference's order of identical events)."""
+    names = [rnd.choice("abd") for _ in range(rnd.randint(2, 3))]
+    leaves_ = [("leaf", name, tuple(rnd.choice([f"{v}{j}", f"{v}{j}", "_"])
+                                    for j in range(TYPES[name])))
+               for name, v in zip(names, "XYZ")]
+    pattern = leaves_[0]
+    for leaf in leaves_[1:]:
+        pattern = (rnd.choice(["seq", "seq", "and", "par", "during", "starts"]), pattern, leaf)
+    rule = {"pattern": pattern, "head": sorted(_vars(pattern)), "where": [], "cnot": None,
+            "within": None, "policy": rnd.choice(["recent", "chronological"])}
+    events = []
+    for _ in range(rnd.randint(2, 5)):
+        name = rnd.choice("abd")
+        args = tuple(rnd.choice([0.0, -0.0, 0.0, 1]) for _ in range(TYPES[name]))
+        s = float(rnd.randint(0, 2))
+        events.append((name, args, s, s + rnd.choice([0.0, 0.0, 1.0])))
+        if rnd.random() < 0.7:
+            events.append((name, tuple(-a if type(a) is float else a for a in args), s,
+                           events[-1][3]))
+    order = list(range(len(events)))
+    rnd.shuffle(order)
+    return rule, events, order
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(st.randoms(use_true_random=False))
+def test_zeros_of_two_signs_at_one_time_are_chosen_as_the_reference_in_any_order(rnd):
+    # recent and chronological break ties of equal times by the stored values: -0.0 and 0.0
+    # are one value to SQL, and the choice between the two went to the arrival order
+    rule, events, order = twin_case(rnd)
+    expected = [(tuple(h), s, e) for h, s, e in reference(rule, events)]
+    got = run(rule, events, order, [], False, False)
+    assert _typed(got) == _typed(expected), (rule_text(rule), events, order)
+
 @st.composite
 def arith_rules(draw):
     """Two or three atoms over a/1 and b/1 with distinct variables and where goals of + and -
@@ -557,11 +601,13 @@ def arith_rules(draw):
 
 @st.composite
 def arith_streams(draw):
-    # 2**60: beyond the range SQL computes exactly (the Python fallback decides)
+    # 2**60: beyond the range SQL computes exactly (the Python fallback decides); the
+    # integers at the ends of 64 bits (SQLite's abs() of the smallest overflows)
     out = []
     for _ in range(draw(integers(2, 10))):
         s = float(draw(integers(0, 6)))
-        value = draw(sampled([0, 1, 2, 3, 1.0, 2.5, 2 ** 60, -(2 ** 60)]))
+        value = draw(sampled([0, 1, 2, 3, 1.0, 2.5, 2 ** 60, -(2 ** 60), -(2 ** 63),
+                              2 ** 63 - 1]))
         out.append((draw(sampled(["a", "b"])), (value,),
                     s, s + float(draw(sampled([0, 0, 1, 3])))))
     return out
@@ -591,6 +637,31 @@ def test_arithmetic_where_is_sql_and_bounds_the_earliest_row():
     assert "where, per candidate" not in text
     assert "slr_cep_ix__face__arg1_arg3" in text
 
+
+
+SMALLEST = -(2 ** 63)   # SQLite's abs() of it is an integer overflow error
+
+
+@pytest.mark.parametrize("where", ["X + Y > 0", "X + Y < 0", "X - Y =< 5", "Y - X >= 5",
+                                   "X - Y > 5"])
+def test_an_arithmetic_where_over_the_smallest_64_bit_integer_decides_as_prolog(backend,
+                                                                                 where):
+    # the guards that keep SQL's arithmetic to its exact range took abs() of the value: on
+    # SQLite an overflow error, so every add that decided such a rule was refused whole
+    rule = f"r(X, Y) <- a(X) seq b(Y) where {where}."
+    x, y = SMALLEST, 1
+    holds = {"X + Y > 0": x + y > 0, "X + Y < 0": x + y < 0, "X - Y =< 5": x - y <= 5,
+             "Y - X >= 5": y - x >= 5, "X - Y > 5": x - y > 5}[where]
+    clock = ManualClock(0.0)
+    with slr_sql.open(backend, clock=clock) as kb:
+        kb.load(rule)
+        assert kb.add_many([f"a({SMALLEST})^1", "a(7)^1.5", "b(1)^2"]) == []
+        clock.set(10.0)
+        got = sorted(((r["X"], r["Y"]) for r in kb.query("r(X, Y)^[_, _]")), key=repr)
+        assert [r["errors"] for r in kb.event_rules()] == [0]
+    seven = {"X + Y > 0": True, "X + Y < 0": False, "X - Y =< 5": False,
+             "Y - X >= 5": False, "X - Y > 5": True}[where]
+    assert got == sorted([(SMALLEST, 1)] * holds + [(7, 1)] * seven, key=repr)
 
 def test_arithmetic_where_on_an_evaluable_atom_is_prolog_s():
     # pi is stored as text: SQL cannot compute Y - pi, the fallback evaluates it as Prolog

@@ -11,12 +11,14 @@ recursive walks of the rule's reader.
 """
 from __future__ import annotations
 
+import os
 import random
 import subprocess
 import sys
 
 import pytest
 import test_cep_differential as cepdiff
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 import slr_sql
 from slr_sql import ManualClock, SLRSyntaxError
@@ -66,6 +68,72 @@ def test_a_pattern_of_the_most_atoms_equals_the_reference(backend, op, policy, w
                       False, where=backend)
     assert cepdiff._typed(got) == cepdiff._typed([(tuple(h), s, e) for h, s, e in expected])
 
+
+
+OPERATORS = ["seq", "and", "par"] * 3 + ["equals", "meets", "during", "starts", "finishes"]
+# a longer hunt: SLR_DIFF_FACTOR=20 runs the random patterns with twenty times their examples
+FACTOR = int(os.environ.get("SLR_DIFF_FACTOR", "1"))
+
+
+def _mixed_pattern(rnd, lo: int, hi: int) -> tuple:
+    """A random tree of the binary operators over the types p<lo>..p<hi - 1>, in order;
+    an argument is X (shared by every part), free, or a variable of its own part."""
+    if hi - lo == 1:
+        return ("leaf", f"p{lo}", (rnd.choice(["X", "X", "_", f"V{lo}"]),))
+    mid = rnd.randint(lo + 1, hi - 1)
+    return (rnd.choice(OPERATORS), _mixed_pattern(rnd, lo, mid), _mixed_pattern(rnd, mid, hi))
+
+
+def _witness(rnd, tree) -> list:
+    """Events [name, start, end] that match ``tree``: each right part is moved in time so
+    that the operator's relation to its left part holds (equals and during, which need
+    lengths that fit, may still fail: a stream without a match is a case too)."""
+    if tree[0] == "leaf":
+        s = float(rnd.randint(0, 3))
+        return [[tree[1], s, s + rnd.choice([0.0, 0.0, 1.0, 2.0])]]
+    left, right = _witness(rnd, tree[1]), _witness(rnd, tree[2])
+    s1, e1 = min(x[1] for x in left), max(x[2] for x in left)
+    s2, e2 = min(x[1] for x in right), max(x[2] for x in right)
+    shift = {"seq": e1 + rnd.choice([1.0, 2.0]) - s2, "meets": e1 - s2, "starts": s1 - s2,
+             "finishes": e1 - e2, "equals": s1 - s2, "during": s1 - s2 - rnd.choice([0.0, 1.0]),
+             "par": s1 - s2 + rnd.choice([-1.0, 0.0, 1.0]),
+             "and": rnd.choice([-2.0, 0.0, 2.0])}[tree[0]]
+    for x in right:
+        x[1] += shift
+        x[2] += shift
+    return left + right
+
+
+def mixed_case(rnd) -> tuple:
+    """(rule, events, arrival order): a pattern of 5 to 10 parts of mixed operators, any
+    policy, sometimes a window; a stream that matches it (X = 0) and events beside it (other
+    values, times moved, ties); a shuffled arrival order."""
+    n = rnd.randint(5, 10)
+    pattern = _mixed_pattern(rnd, 0, n)
+    rule = {"pattern": pattern, "head": sorted(cepdiff._vars(pattern)), "where": [],
+            "cnot": None, "within": rnd.choice([None, None, n, 3]),
+            "policy": rnd.choice(["unrestricted", "recent", "chronological"])}
+    events = [(name, (0,), s, e) for name, s, e in _witness(rnd, pattern)]
+    first = min(ev[2] for ev in events)
+    events = [(name, args, s - first, e - first) for name, args, s, e in events]
+    for _ in range(rnd.randint(1, n)):
+        name, _, s, e = rnd.choice(events)
+        start = max(0.0, s + rnd.choice([0.0, 0.0, 1.0, -1.0, 2.0]))
+        events.append((name, (rnd.choice([0, 0, 1]),), start,
+                       start + rnd.choice([0.0, e - s, 1.0])))
+    order = list(range(len(events)))
+    rnd.shuffle(order)
+    return rule, events, order
+
+
+@settings(max_examples=10 * FACTOR, deadline=None, suppress_health_check=list(HealthCheck))
+@given(st.randoms(use_true_random=False))
+def test_a_long_pattern_of_mixed_operators_equals_the_reference(rnd):
+    rule, events, order = mixed_case(rnd)
+    expected = cepdiff.reference(rule, events)
+    got = cepdiff.run(rule, events, order, [rnd.randint(0, len(events))], False, False)
+    assert cepdiff._typed(got) == cepdiff._typed([(tuple(h), s, e) for h, s, e in expected]), \
+        (cepdiff.rule_text(rule), events, order)
 
 def test_a_variable_of_every_part_is_tied_once_per_part_in_a_statement(kb):
     # (each part equal to the first one joined: n - 1 equalities, not n(n-1)/2, which made

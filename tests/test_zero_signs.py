@@ -173,6 +173,35 @@ def test_event_rules_tell_the_zeros_apart_as_the_reference(database, place, poli
             (cepdiff.rule_text(rule), order)
 
 
+
+# events of one time told apart by their zeros alone: which is the newest (recent) or the
+# oldest (chronological), and which terminator goes first, is the order of the values (-0.0
+# before 0.0, Prolog's standard order), never the order they arrived in
+TIED_EVENTS = [("a", (-0.0,), 1.0, 1.0), ("a", (0.0,), 1.0, 1.0), ("a", (1,), 0.0, 0.0),
+               ("b", (0.0,), 2.0, 2.0), ("b", (-0.0,), 2.0, 2.0)]
+
+
+@pytest.mark.parametrize("place", ["sqlite", "postgres"])
+@pytest.mark.parametrize("policy", ["recent", "chronological"])
+def test_events_of_one_time_and_zeros_of_two_signs_are_chosen_in_any_arrival_order(
+        database, place, policy):
+    import test_cep_differential as cepdiff
+
+    pattern = ("seq", ("leaf", "a", ("X",)), ("leaf", "b", ("Y",)))
+    rule = {"pattern": pattern, "head": ["X", "Y"], "where": [], "cnot": None,
+            "within": None, "policy": policy}
+    expected = {"recent": [((0.0, -0.0), 1.0, 2.0), ((0.0, 0.0), 1.0, 2.0)],
+                "chronological": [((1, -0.0), 0.0, 2.0), ((-0.0, 0.0), 1.0, 2.0)]}[policy]
+    assert cepdiff._typed(cepdiff.reference(rule, TIED_EVENTS)) == \
+        sorted(cepdiff._typed(expected))
+    # (the a's first or last; a(0.0) before a(-0.0) and b(0.0) before b(-0.0), or after)
+    for order in ([1, 0, 2, 3, 4], [0, 1, 2, 4, 3], [4, 3, 2, 1, 0], [3, 4, 0, 2, 1]):
+        where = None if place == "sqlite" else \
+            database + ("&" if "?" in database else "?") + f"schema=zt{next(_SCHEMAS)}"
+        got = cepdiff.run(rule, TIED_EVENTS, order, [], False, False, where=where)
+        assert sorted(cepdiff._typed(got)) == sorted(cepdiff._typed(expected)), order
+
+
 # facts and rules of a program (no events): clause indexing, the facts' SQL tables, joins
 PROGRAM = """f(0.0, a).
 f(-0.0, b).

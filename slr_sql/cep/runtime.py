@@ -134,7 +134,8 @@ def _sqlite_key(v: Any, from_column: Any = None) -> tuple:
     if type(v) is int:
         return (0, v, "integer")
     if type(v) is float:
-        return (0, v, "real")
+        # (-0.0 before 0.0, as the statements' ORDER BY puts them: Prolog's standard order)
+        return (0, v, "real", math.copysign(1.0, v))
     if isinstance(v, str):
         return (1, 0, v)
     return (2, 0, repr(v))

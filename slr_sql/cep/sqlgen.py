@@ -502,13 +502,15 @@ class AltSQL:
             return None
         typeof = self.dialect.typeof
         guards = []
+        # (a range, not abs(): SQLite's abs() of the smallest 64-bit integer is an overflow
+        # error, which failed the whole statement and so the add that decided it)
         for ref in leaves:
             if ref.kind == "data":
-                guards.append(f"(({typeof(ref.sql)} = 'integer' AND abs({ref.sql}) <= "
-                              f"{_INT_BOUND}) OR ({typeof(ref.sql)} = 'real' AND "
-                              f"abs({ref.sql}) <= {_REAL_BOUND!r}))")
+                guards.append(f"(({typeof(ref.sql)} = 'integer' AND {ref.sql} BETWEEN "
+                              f"-{_INT_BOUND} AND {_INT_BOUND}) OR ({typeof(ref.sql)} = 'real' "
+                              f"AND {ref.sql} BETWEEN -{_REAL_BOUND!r} AND {_REAL_BOUND!r}))")
             else:
-                guards.append(f"abs({ref.sql}) <= {_REAL_BOUND!r}")
+                guards.append(f"{ref.sql} BETWEEN -{_REAL_BOUND!r} AND {_REAL_BOUND!r}")
         text = self._param(format_term(Struct(g.name, (a[1], b[1]))))
         values = ", ".join(ref.sql for ref in leaves)
         fallback = f"slr_cep_arith({text}{', ' if values else ''}{values})"
@@ -545,8 +547,11 @@ class AltSQL:
         x_num = (f"{self.dialect.typeof(rx.sql)} {_NUMERIC}" if rx.kind == "data"
                  else self.dialect.true)
         c = self._param(float(rhs))
-        bound = (f"(CASE WHEN {x_num} AND abs({rx.sql}) <= {_REAL_BOUND!r} THEN {rx.sql} - "
-                 f"{c} - (abs({rx.sql}) + abs({c})) * 1e-9 - 1e-9 ELSE "
+        # (X as a float before abs(): abs() of the smallest 64-bit integer is an overflow
+        # error in SQLite; the bound is a loose one anyway)
+        bound = (f"(CASE WHEN {x_num} AND {rx.sql} BETWEEN -{_REAL_BOUND!r} AND "
+                 f"{_REAL_BOUND!r} THEN {rx.sql} - {c} - (abs({rx.sql} + 0.0) + abs({c})) "
+                 f"* 1e-9 - 1e-9 ELSE "
                  f"{self.dialect.infinity(True)} END)")
         (pos,) = ry.positions
         self.conds.append(_Cond(ry.positions | rx.positions, f"{ry.sql} >= {bound}"))

@@ -123,12 +123,16 @@ class SQLiteQueryPrinter:
         """The ORDER BY keys that put stored values in SQLite's order (the order that
         breaks an event rule's ties between events of the same times): numbers first, by
         value (an integer and a real compared exactly), then text byte by byte, then the
-        SQL type (1 before 1.0).
+        SQL type (1 before 1.0), then -0.0 before 0.0 (Prolog's standard order: to SQL's
+        order the two are one value, and the tie went to the arrival order).
 
-        >>> SQLiteQueryPrinter().value_order("e0.arg1")
+        >>> SQLiteQueryPrinter().value_order("e0.arg1")[:2]
         ['e0.arg1', 'typeof(e0.arg1)']
         """
-        return [value, f"typeof({value})"]
+        # (slr_sign_bit is called for the zeros alone)
+        return [value, f"typeof({value})",
+                f"(CASE WHEN {value} = 0 AND typeof({value}) = 'real' "
+                f"THEN 1 - slr_sign_bit({value}) END)"]
 
     def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
         """``a op b`` for an arithmetic comparison of two numbers of the kinds ``float``
@@ -310,7 +314,8 @@ class PostgresQueryPrinter:
                 f"AND substr({value}, 11, 1) NOT IN ('[', '{{', '\\') "
                 f"AND strpos({value}, '\\u0000') = 0 "
                 f"THEN CAST({value} AS json) ->> '$atom' ELSE {value} END END) COLLATE \"C\"")
-        return [number, text, f"slr_typeof({value})"]
+        # (-0.0 before 0.0: the number key takes them for one value; false sorts first)
+        return [number, text, f"slr_typeof({value})", f"({value} <> '-0.0')"]
 
     def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
         # a double meets an integer or a stored value as a NUMERIC (the server would turn
