@@ -361,6 +361,58 @@ class RuleRuntime:
                             out.append((name, table, columns))
         return out
 
+    def prepare_statements(self) -> int:
+        """Build the statements that this rule's first add or decision runs (for an add of
+        one type), without running them; returns how many were built.
+
+        Building a statement asks for the start-ordered indexes its plan wants
+        (``on_statement``: :meth:`EventStore.prepare_start_order`), and a store that already
+        holds many events then builds them over the whole history: ~1.0-1.6 s CPU at
+        1,000,000 events. A load calls this for the rules it installs (:meth:`EventRules.
+        on_load`), so that this cost is the load's, not the first add's: the add is what a
+        live stream waits on. An alternative some type of which has no table yet builds
+        nothing (its statements are built once the table exists). Returns how many
+        statements the rule has ready (built now, or before).
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+        >>> _ = kb.add_many(["a(1)^1", "b(1)^2"])
+        >>> sorted(kb.store.index_names("b"))
+        ['slr_ix__b__a1_end', 'slr_ix__b__end']
+        >>> kb.load("c(X) <- a(X) seq b(X).")   # (a new a searches the b after it by start)
+        >>> sorted(kb.store.index_names("b"))
+        ['slr_ix__b__a1_end', 'slr_ix__b__a1_start', 'slr_ix__b__end', 'slr_ix__b__start']
+        >>> kb._cep.rules[0].prepare_statements()   # (the load's: built already)
+        2
+        """
+        self.ensure_built()
+        built = 0
+        for n, alt in enumerate(self.alts):
+            if not alt.runnable:
+                continue
+            for pos, leaf in enumerate(alt.alt.leaves):
+                if self.policy == "unrestricted":
+                    dirty = {leaf.key}
+                    if alt.pure and not self.reads_store[n]:
+                        statements = [alt.delta_insert(pos, dirty)]
+                        if alt.negs:
+                            statements.append(alt.delta_pending(pos, dirty))
+                    else:
+                        statements = [alt.delta_select(pos, dirty)]
+                elif pos not in alt.alt.terminators:
+                    continue
+                elif self.policy == "recent" and alt.pure:
+                    statements = [alt.recent_insert(pos), alt.term_span(pos),
+                                  alt.term_pending(pos, True), alt.span_recent_insert(pos),
+                                  alt.span_split(pos), alt.pending_recent_insert(pos)]
+                elif self.policy == "recent":
+                    statements = [alt.term_ready(pos), alt.term_pending(pos, True),
+                                  alt.term_select(pos, False), alt.term_select_many(pos)]
+                else:
+                    statements = [alt.term_pending(pos, False), alt.term_select(pos, alt.pure)]
+                built += len(statements)
+        return built
+
     def ensure_built(self) -> None:
         if self.generation != self.eng.generation or self._tables_appeared():
             self.build()
@@ -1095,8 +1147,15 @@ class EventRules:
         self._wake_due = True
 
     def on_load(self, kb: Host) -> None:
-        """Load listener (inside the load's transaction)."""
+        """Load listener (inside the load's transaction): the rules the load installs
+        build their statements, and so the start-ordered indexes these want, now
+        (:meth:`RuleRuntime.prepare_statements`), not at the first add."""
+        installed = {rt.key for rt in self.rules}
         self.sync_rules()
+        with self.store.lock:
+            for rt in self.rules:
+                if rt.key not in installed:
+                    rt.prepare_statements()
 
     def on_table(self, name: str, arity: int, table: str) -> None:
         """A new event table: rules reading that type can now match (rebuild their SQL)."""
