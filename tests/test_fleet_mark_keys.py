@@ -5,7 +5,8 @@ name and the type's name hold (docs/fleet.md, "Marks"): robot ``r1/x``'s mark of
 r1's history of ``'x/seen'/2`` as complete to a later time. A store of the layout before
 (schema version 13) is migrated (0014): its keys rewritten, a key that two robots it knows
 may have written dropped. Real files, real PostgreSQL, a real ``slr serve`` with robot
-tokens."""
+tokens. Also: ``slr fleet status --json`` writes a time that is not finite as
+``{"$float": "inf"}``, not as ``Infinity`` (no JSON)."""
 from __future__ import annotations
 
 import json
@@ -169,3 +170,24 @@ def test_a_version_13_fleet_mark_key_of_no_known_robot_is_dropped(tmp_path):
     as_version_13(central)
     assert keys(central) == {"fleet/mark/u/w/1": 4.0}
 
+
+# -- slr fleet status --json -------------------------------------------------------------------
+
+def test_fleet_status_json_writes_a_time_that_is_not_finite_as_the_cli_does(tmp_path):
+    central = str(tmp_path / "central.db")
+    fleet.push(robot_store(tmp_path / "r1.db", "r1", {}, "seen(a)^1"), central)
+    # (a fleet file edited by hand, or written by another make)
+    conn = sqlite3.connect(central, isolation_level=None)
+    conn.execute("UPDATE slr_fleet_robots SET contact_at = 9e999, pending = 1, "
+                  "head_arrival = 9e999, last_arrival = 0")
+    conn.close()
+    shown = subprocess.run([sys.executable, "-m", "slr_sql", "fleet", "status", central,
+                            "--json"], env=slr_env(), capture_output=True, text=True,
+                           timeout=120)
+    assert shown.returncode == 0, shown.stderr
+
+    def no_constant(text: str):
+        raise AssertionError(f"{text} is no JSON")
+    rows = json.loads(shown.stdout, parse_constant=no_constant)
+    assert [(r["robot"], r["last_contact"], r["lag_seconds"]) for r in rows] == [
+        ("r1", {"$float": "inf"}, {"$float": "inf"})]
