@@ -583,27 +583,19 @@ def _relayed_marks(store: EventStore, robot: str) -> dict[str, dict[str, float]]
     """The marks ``store`` holds of robots other than ``robot`` (``fleet/mark/<r>/p/N``,
     kept when they shipped to it): ``{r: {"p/N": t}}``, shipped with the store's own so
     that a fleet store holding their rows, relayed by this one, knows how far each robot's
-    history is complete. A key is read as the mark of the longest name among the robots
-    the store knows that it starts with (a robot's name may hold a ``/``).
+    history is complete.
 
     >>> from slr_sql.store import EventStore
     >>> _relayed_marks(EventStore(None), "hub")
     {}
     """
-    from .shipping import FLEET_MARK, names_a_type
-    items = store.meta_items(FLEET_MARK)
-    if not items:
-        return {}
-    names = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()}
-    names = sorted((n for n in names if n is not None), key=len, reverse=True)
+    from .shipping import FLEET_MARK, read_fleet_mark_key
     out: dict[str, dict[str, float]] = {}
-    for key, value in items.items():
-        rest = key[len(FLEET_MARK):]
-        who = next((n for n in names if rest.startswith(n + "/")
-                    and names_a_type(rest[len(n) + 1:])), None)
-        if who is None or who == robot or not _is_mark(value):
+    for key, value in store.meta_items(FLEET_MARK).items():
+        read = read_fleet_mark_key(key)
+        if read is None or read[0] == robot or not _is_mark(value):
             continue
-        out.setdefault(who, {})[rest[len(who) + 1:]] = float(value)
+        out.setdefault(read[0], {})[read[1]] = float(value)
     return out
 
 
@@ -888,7 +880,11 @@ def click_group() -> Any:
             refuse_no_store(fleet)
         rows = status(fleet, token=token_of(ctx))
         if as_json:
-            click.echo(json.dumps(rows, indent=2))
+            from .cli import _json_float
+            # (a time that is not finite, from a fleet file edited by hand or a server of
+            # another make, as the rest of the command line writes one: JSON has no Infinity)
+            click.echo(json.dumps([{k: _json_float(v) for k, v in r.items()} for r in rows],
+                                  indent=2, allow_nan=False))
             return
         if not rows:
             click.echo("no robot has shipped to this store")

@@ -14,6 +14,7 @@ rules the rows go in as they are stored on the robot (no decoding).
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 from .encoding import INT64_MAX, INT64_MIN, decode
@@ -22,11 +23,17 @@ from .host import Host
 from .store import check_robot_name
 from .store.checks import shown, text_problem
 
-__all__ = ["FLEET_MARK", "FleetBehind", "ShipmentRefused", "names_a_type", "positions", "prepare",
-           "receive"]
+__all__ = ["FLEET_MARK", "FleetBehind", "ShipmentRefused", "fleet_mark_key", "names_a_type",
+           "positions", "prepare", "read_fleet_mark_key", "receive"]
 
 _JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
-FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
+# slr_meta prefix of the marks kept per robot: fleet/mark/<robot, escaped>/<name>/<arity or *>.
+# A robot's name and a type's name may both hold '/' ('x/seen' is an atom), so the robot is
+# written with '%' and '/' as %25 and %2F: the first '/' after the prefix ends it, and robot
+# r1/x's mark of seen/2 (fleet/mark/r1%2Fx/seen/2) is no longer robot r1's of 'x/seen'/2
+# (fleet/mark/r1/x/seen/2). A name without either character is written as it is, so a store
+# of the layout before (schema version 13) needed only its other keys rewritten (0014).
+FLEET_MARK = "fleet/mark/"
 
 
 class FleetBehind(SLRError):
@@ -146,7 +153,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             _check_mark_routes(store, robot, given)
             for who, its_marks in given.items():
                 for mk, t in its_marks.items():
-                    store.meta_raise(f"{FLEET_MARK}{who}/{mk}", float(t))
+                    store.meta_raise(fleet_mark_key(who, mk), float(t))
             # the robots the fleet knows: those it holds events of (relayed ones included),
             # those that made contact and have a history here or on the way (a robot whose
             # store has marks and no event yet counts from its first mark), and this one --
@@ -157,7 +164,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             robots.add(robot)
             robots.discard(store.robot)
             for mk in sorted({mk for its_marks in given.values() for mk in its_marks}):
-                known = [store.meta_get(f"{FLEET_MARK}{r}/{mk}") for r in robots]
+                known = [store.meta_get(fleet_mark_key(r, mk)) for r in robots]
                 if all(v is not None for v in known):
                     store.meta_raise(f"sync/mark/{mk}", min(float(v) for v in known))
         if pending is not None:
@@ -284,7 +291,7 @@ def _holds_marks_back(store: Any, contact: dict) -> bool:
     """
     if contact["via"] is not None or contact["shipped"] or contact["pending"]:
         return True
-    prefix = f"{FLEET_MARK}{contact['robot']}/"
+    prefix = fleet_mark_key(contact["robot"], "")
     return any(names_a_type(key[len(prefix):]) for key in store.meta_items(prefix))
 
 
@@ -317,6 +324,36 @@ def _check_after(after: Any) -> None:
             and type(a[1]) is int and a[1] >= 0 and type(a[2]) is int and a[2] >= 0
             for a in after)):
         raise SLRError("a shipment's after is a list of [name, arity, position]")
+
+
+def fleet_mark_key(robot: str, mark: str) -> str:
+    """The ``slr_meta`` key of ``robot``'s completeness mark ``mark`` (``p/N`` or ``p/*``) on a
+    fleet store: the robot's name with ``%`` and ``/`` escaped, so that no two robots' marks
+    share a key whatever '/' their names and their types' names hold.
+
+    >>> fleet_mark_key("r1/x", "seen/2"), fleet_mark_key("r1", "x/seen/2")
+    ('fleet/mark/r1%2Fx/seen/2', 'fleet/mark/r1/x/seen/2')
+    """
+    return f"{FLEET_MARK}{robot.replace('%', '%25').replace('/', '%2F')}/{mark}"
+
+
+_ESCAPED = re.compile("%(25|2F)")
+
+
+def read_fleet_mark_key(key: str) -> tuple[str, str] | None:
+    """``(robot, mark)`` of a key :func:`fleet_mark_key` wrote, or None for any other key.
+
+    >>> read_fleet_mark_key("fleet/mark/r1%2Fx/seen/2"), read_fleet_mark_key("fleet/mark/r1/x/seen/2")
+    (('r1/x', 'seen/2'), ('r1', 'x/seen/2'))
+    >>> read_fleet_mark_key("fleet/mark/r1/seen") is None
+    True
+    """
+    if not key.startswith(FLEET_MARK):
+        return None
+    robot, slash, mark = key[len(FLEET_MARK):].partition("/")
+    if not slash or not names_a_type(mark):
+        return None
+    return _ESCAPED.sub(lambda m: "%" if m[1] == "25" else "/", robot), mark
 
 
 def names_a_type(key: str) -> bool:

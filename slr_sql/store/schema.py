@@ -12,6 +12,7 @@ table with a never-reused ``seq``).
 from __future__ import annotations
 
 import functools
+import json
 import importlib.resources
 import re
 import sqlite3
@@ -147,8 +148,59 @@ def _never_reused_sequences(conn: sqlite3.Connection) -> None:
             conn.execute(sql)
 
 
+def old_fleet_mark_reading(rest: str, known: set[str]) -> tuple[str, str] | None:
+    """``(robot, mark)`` of a fleet mark key of schema version 13 and before, ``rest`` being
+    the key after ``fleet/mark/`` (``robot/name/arity``, the robot's name and the type's name
+    as they are), or None when it cannot be told whose mark it is: a key of more than three
+    segments is read as the mark of the one robot of ``known`` it starts with.
+
+    >>> old_fleet_mark_reading("r1/seen/2", set())
+    ('r1', 'seen/2')
+    >>> old_fleet_mark_reading("r1/x/seen/2", {"r1"}), old_fleet_mark_reading("r1/x/seen/2", {"r1", "r1/x"})
+    (('r1', 'x/seen/2'), None)
+    """
+    segments = rest.split("/")
+    last = segments[-1]
+    if len(segments) < 3 or not (last == "*" or (last.isascii() and last.isdigit())):
+        return None
+    if len(segments) == 3:
+        return segments[0], "/".join(segments[1:])
+    readings = [("/".join(segments[:k]), "/".join(segments[k:]))
+                for k in range(1, len(segments) - 1)]
+    readings = [r for r in readings if r[0] in known]
+    return readings[0] if len(readings) == 1 else None
+
+
+def _unambiguous_fleet_mark_keys(conn: sqlite3.Connection) -> None:
+    """Rewrite the fleet mark keys of version 13 and before into the escaped form of
+    :func:`slr_sql.shipping.fleet_mark_key` (see ``0014_fleet_mark_keys.sql``)."""
+    from ..shipping import FLEET_MARK, fleet_mark_key
+    known = {row[0] for row in conn.execute(
+        "SELECT name FROM slr_robots UNION SELECT robot FROM slr_fleet_robots "
+        "UNION SELECT robot FROM slr_fleet_routes UNION SELECT via FROM slr_fleet_routes")}
+    own = conn.execute("SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
+    if own is not None:
+        try:
+            known.add(json.loads(own[0]))
+        except ValueError:
+            pass
+    rows = conn.execute("SELECT key, value FROM slr_meta WHERE substr(key, 1, ?) = ?",
+                        (len(FLEET_MARK), FLEET_MARK)).fetchall()
+    rewritten = []
+    for key, value in rows:
+        reading = old_fleet_mark_reading(key[len(FLEET_MARK):], known)
+        new = None if reading is None else fleet_mark_key(*reading)
+        if new != key:
+            rewritten.append((key, new, value))
+    # every old key out first: a new key may be the old key of another mark
+    conn.executemany("DELETE FROM slr_meta WHERE key = ?", [(k,) for k, _, _ in rewritten])
+    conn.executemany("INSERT INTO slr_meta (key, value) VALUES (?, ?)",
+                     [(new, value) for _, new, value in rewritten if new is not None])
+
+
 # (SQL cannot loop over tables and read their definitions: these steps run after their file)
-_PYTHON_STEPS = {"0007_sequences.sql": _never_reused_sequences}
+_PYTHON_STEPS = {"0007_sequences.sql": _never_reused_sequences,
+                 "0014_fleet_mark_keys.sql": _unambiguous_fleet_mark_keys}
 
 
 def migrate(conn: sqlite3.Connection, path: str | None,

@@ -1,0 +1,17 @@
+-- slr_sql schema, version 14: unambiguous keys of the marks a fleet store keeps per robot
+-- (docs/fleet.md, "Marks"; the counterpart of pg_0014_fleet_mark_keys.sql).
+-- Up to version 13 robot R's mark of type p/N was kept under slr_meta key
+-- fleet/mark/R/p/N. A robot's name and a type's name may both hold '/', so robot r1/x's
+-- mark of seen/2 and robot r1's mark of 'x/seen'/2 shared one key. From this version on R
+-- is written with '%' as %25 and '/' as %2F (slr_sql.shipping.fleet_mark_key). The keys are
+-- rewritten by a Python step after this script (slr_sql/store/schema.py,
+-- _unambiguous_fleet_mark_keys; SQL cannot split a key on each of its '/' in turn):
+--   * fleet/mark/A/B/C (one robot segment, one name segment, the arity) has one reading;
+--   * a key with more segments is read as the mark of the one robot this store knows
+--     (slr_robots, slr_fleet_robots, slr_fleet_routes, the store's own name) that it can
+--     start with; a key that several known robots, or none, can start with is dropped: its
+--     value may have been raised by either robot, and keeping it could let the fleet take
+--     a history as complete too early. Dropping a mark is safe: the robot (or the store
+--     relaying it) ships its marks again with its next round, and until then the fleet's
+--     own mark of the type (which only grows) just does not move.
+SELECT 1;
