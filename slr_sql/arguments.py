@@ -172,3 +172,20 @@ class ListenerList(list[T]):
             super().__setitem__(index, self._checked(value))
         else:
             super().__setitem__(index, check_callable(f"{self.name}: a listener", value))
+
+
+def refuse_memory_store(path: str | None, command: str) -> None:
+    """Refuse ``":memory:"`` as the store of ``command`` (``slr add``, ...), which writes to
+    it: a store in memory would start empty and vanish with what was written when the
+    command exits (an API call, ``slr_sql.open(":memory:")``, keeps it while it runs).
+
+    >>> refuse_memory_store("robot.db", "slr add")
+    >>> refuse_memory_store(":memory:", "slr add")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: slr add: ':memory:' is a store in memory, which would start empty and vanish with what slr add writes when it exits; give the store's file (or a PostgreSQL URL)
+    """
+    if path == ":memory:":
+        raise SLRError(f"{command}: ':memory:' is a store in memory, which would start empty "
+                       f"and vanish with what {command} writes when it exits; give the "
+                       "store's file (or a PostgreSQL URL)")

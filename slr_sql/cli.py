@@ -30,7 +30,9 @@ from .arguments import check_time_option
 from .kb import KnowledgeBase
 from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
-from .store import refuse_memory_store, refuse_no_store, shown_location
+from .arguments import refuse_memory_store
+from .printable import json_float
+from .store import refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
 
 __all__ = ["main", "parse_event_line", "ingest_file", "IngestReport", "strip_full_stop"]
@@ -1174,7 +1176,7 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     if fmt in ("json", "nl"):
         from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
 
-        cells = ([_json_float(json_cell(v)) for v in row] for row in rows)
+        cells = ([json_float(json_cell(v)) for v in row] for row in rows)
         for line in output_rows(cells, columns, nl=fmt == "nl", arrays=False, json_cols=False):
             out.write(line + "\n")
     elif fmt in ("csv", "tsv"):
@@ -1194,13 +1196,6 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
         # Into a pipe the table is not cut to the terminal's width.
         Console(file=out, highlight=False, markup=False,
                 width=None if out.isatty() else 500).print(table)
-
-
-def _json_float(value: Any) -> Any:
-    """``value``, a non-finite float as ``{"$float": "inf" | "-inf" | "nan"}``."""
-    if type(value) is float and not math.isfinite(value):
-        return {"$float": "nan" if value != value else ("inf" if value > 0 else "-inf")}
-    return value
 
 
 @main.command()

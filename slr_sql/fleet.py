@@ -28,7 +28,8 @@ from typing import Any, Protocol, TypeVar
 
 from .errors import SLRError
 from .printable import printable_name, printable_text
-from .store import EventStore, WriterInFlight, check_robot_name, refuse_memory_store, refuse_no_store, \
+from .arguments import refuse_memory_store
+from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store, \
     shown_location
 
 __all__ = ["FleetRefused", "FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
@@ -880,10 +881,10 @@ def click_group() -> Any:
             refuse_no_store(fleet)
         rows = status(fleet, token=token_of(ctx))
         if as_json:
-            from .cli import _json_float
+            from .printable import json_float
             # (a time that is not finite, from a fleet file edited by hand or a server of
             # another make, as the rest of the command line writes one: JSON has no Infinity)
-            click.echo(json.dumps([{k: _json_float(v) for k, v in r.items()} for r in rows],
+            click.echo(json.dumps([{k: json_float(v) for k, v in r.items()} for r in rows],
                                   indent=2, allow_nan=False))
             return
         if not rows:

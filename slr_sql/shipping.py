@@ -14,7 +14,6 @@ rules the rows go in as they are stored on the robot (no decoding).
 from __future__ import annotations
 
 import math
-import re
 from typing import Any
 
 from .encoding import INT64_MAX, INT64_MIN, decode
@@ -22,6 +21,7 @@ from .errors import SLRError
 from .host import Host
 from .store import check_robot_name
 from .store.checks import shown, text_problem
+from .store.fleet_keys import FLEET_MARK, fleet_mark_key, names_a_type, read_fleet_mark_key
 
 __all__ = ["FLEET_MARK", "FleetBehind", "ShipmentRefused", "fleet_mark_key", "names_a_type",
            "positions", "prepare", "read_fleet_mark_key", "receive"]
@@ -33,7 +33,6 @@ _JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.enc
 # r1/x's mark of seen/2 (fleet/mark/r1%2Fx/seen/2) is no longer robot r1's of 'x/seen'/2
 # (fleet/mark/r1/x/seen/2). A name without either character is written as it is, so a store
 # of the layout before (schema version 13) needed only its other keys rewritten (0014).
-FLEET_MARK = "fleet/mark/"
 
 
 class FleetBehind(SLRError):
@@ -324,46 +323,6 @@ def _check_after(after: Any) -> None:
             and type(a[1]) is int and a[1] >= 0 and type(a[2]) is int and a[2] >= 0
             for a in after)):
         raise SLRError("a shipment's after is a list of [name, arity, position]")
-
-
-def fleet_mark_key(robot: str, mark: str) -> str:
-    """The ``slr_meta`` key of ``robot``'s completeness mark ``mark`` (``p/N`` or ``p/*``) on a
-    fleet store: the robot's name with ``%`` and ``/`` escaped, so that no two robots' marks
-    share a key whatever '/' their names and their types' names hold.
-
-    >>> fleet_mark_key("r1/x", "seen/2"), fleet_mark_key("r1", "x/seen/2")
-    ('fleet/mark/r1%2Fx/seen/2', 'fleet/mark/r1/x/seen/2')
-    """
-    return f"{FLEET_MARK}{robot.replace('%', '%25').replace('/', '%2F')}/{mark}"
-
-
-_ESCAPED = re.compile("%(25|2F)")
-
-
-def read_fleet_mark_key(key: str) -> tuple[str, str] | None:
-    """``(robot, mark)`` of a key :func:`fleet_mark_key` wrote, or None for any other key.
-
-    >>> read_fleet_mark_key("fleet/mark/r1%2Fx/seen/2"), read_fleet_mark_key("fleet/mark/r1/x/seen/2")
-    (('r1/x', 'seen/2'), ('r1', 'x/seen/2'))
-    >>> read_fleet_mark_key("fleet/mark/r1/seen") is None
-    True
-    """
-    if not key.startswith(FLEET_MARK):
-        return None
-    robot, slash, mark = key[len(FLEET_MARK):].partition("/")
-    if not slash or not names_a_type(mark):
-        return None
-    return _ESCAPED.sub(lambda m: "%" if m[1] == "25" else "/", robot), mark
-
-
-def names_a_type(key: str) -> bool:
-    """``p/2`` or ``p/*``: what a completeness mark is kept under.
-
-    >>> names_a_type("seen/2"), names_a_type("a/b/*"), names_a_type("seen"), names_a_type("p/x")
-    (True, True, False, False)
-    """
-    _, slash, arity = key.rpartition("/")
-    return bool(slash) and (arity == "*" or (arity.isascii() and arity.isdigit()))
 
 
 def _stored_term_problem(value: Any) -> str | None:

@@ -81,7 +81,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
     db = db_option or db_argument
     if db is None:
         raise click.UsageError("no store: slr ros import BAG --db DB")
-    from ..store import refuse_memory_store
+    from ..arguments import refuse_memory_store
     refuse_memory_store(db, "slr ros import")
     mapping = _load_mapping(map_path, "import")
     try:

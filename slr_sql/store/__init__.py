@@ -57,7 +57,7 @@ from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEqua
 from .catalog import Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
-    ReadConnection, check_file_options, is_postgres_url, refuse_memory_store, refuse_no_store, run_sql_file, \
+    ReadConnection, check_file_options, is_postgres_url, refuse_no_store, run_sql_file, \
     shown_location
 from .events import Event, EventBatch, EventWriter
 from .fleet import ROBOT_NAME_MAX, Fleet, RouteConflict, ShipmentConflict, WriterInFlight, \
@@ -72,7 +72,7 @@ from .tables import EventTables, start_compared
 
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "RawPage", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
-           "migration_scripts", "split_sql_script", "run_sql_file", "refuse_memory_store", "refuse_no_store", "shown_location", "store_error",
+           "migration_scripts", "split_sql_script", "run_sql_file", "refuse_no_store", "shown_location", "store_error",
            "check_robot_name", "ROBOT_NAME_MAX", "RouteConflict", "ShipmentConflict", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
            "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader", "null_argument_text",
            "SubscriptionRecord"]

@@ -50,7 +50,7 @@ from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_s
 from .sqltext import file_identity as _file_identity, file_uri as _file_uri
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
-           "run_sql_file", "check_file", "refuse_memory_store", "refuse_no_store", "check_busy_timeout", "is_postgres_url"]
+           "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout", "is_postgres_url"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...; a condition of the file
@@ -507,23 +507,6 @@ def read_only_uri(path: str) -> str:
     'file:///media/ro/robot.db?mode=ro&immutable=1'
     """
     return _file_uri(path, "ro") + ("" if os.path.exists(path + "-wal") else "&immutable=1")
-
-
-def refuse_memory_store(path: str | None, command: str) -> None:
-    """Refuse ``":memory:"`` as the store of ``command`` (``slr add``, ...), which writes to
-    it: a store in memory would start empty and vanish with what was written when the
-    command exits (an API call, ``slr_sql.open(":memory:")``, keeps it while it runs).
-
-    >>> refuse_memory_store("robot.db", "slr add")
-    >>> refuse_memory_store(":memory:", "slr add")
-    Traceback (most recent call last):
-    ...
-    slr_sql.errors.SLRError: slr add: ':memory:' is a store in memory, which would start empty and vanish with what slr add writes when it exits; give the store's file (or a PostgreSQL URL)
-    """
-    if path == ":memory:":
-        raise SLRError(f"{command}: ':memory:' is a store in memory, which would start empty "
-                       f"and vanish with what {command} writes when it exits; give the "
-                       "store's file (or a PostgreSQL URL)")
 
 
 def refuse_no_store(path: str) -> None:

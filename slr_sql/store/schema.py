@@ -173,8 +173,8 @@ def old_fleet_mark_reading(rest: str, known: set[str]) -> tuple[str, str] | None
 
 def _unambiguous_fleet_mark_keys(conn: sqlite3.Connection) -> None:
     """Rewrite the fleet mark keys of version 13 and before into the escaped form of
-    :func:`slr_sql.shipping.fleet_mark_key` (see ``0014_fleet_mark_keys.sql``)."""
-    from ..shipping import FLEET_MARK, fleet_mark_key
+    :func:`slr_sql.store.fleet_keys.fleet_mark_key` (see ``0014_fleet_mark_keys.sql``)."""
+    from .fleet_keys import FLEET_MARK, fleet_mark_key
     known = {row[0] for row in conn.execute(
         "SELECT name FROM slr_robots UNION SELECT robot FROM slr_fleet_robots "
         "UNION SELECT robot FROM slr_fleet_routes UNION SELECT via FROM slr_fleet_routes")}
