@@ -2203,6 +2203,26 @@ def _out(m: "Machine"):
     return m.engine.out or sys.stdout
 
 
+class DiscardedOutput:
+    """An output that drops what is written: where a served knowledge base's queries write
+    (``slr serve``, docs/service.md), so no client writes into the operator's logs.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.engine.out = kb.engine.err = DiscardedOutput()
+    >>> kb.query("write(hi), print_message(error, format('~w', [x]))"); kb.close()
+    [{}]
+    """
+
+    position = 0   # (format/2's column stops count from the start of a line)
+
+    def write(self, text: str) -> None:
+        pass
+
+    def flush(self) -> None:
+        pass
+
+
 class _Capture:
     """with_output_to/2's text so far (bounded as format/2's output is), or a stream alias
     its goal's output goes to (``with_output_to(user_error, G)``)."""
@@ -2246,7 +2266,7 @@ def _stream_alias(m: "Machine", t: Any, sink: bool) -> Any:
         if t == "user_output":
             return m.engine.out or sys.stdout
         if t == "user_error":
-            return sys.stderr
+            return m.engine.err or sys.stderr
         if t == "user_input":
             raise iso_error(Struct("permission_error", (Atom("output"), Atom("stream"), t)))
         raise iso_error(Struct("existence_error", (Atom("stream"), t)))
@@ -2492,7 +2512,7 @@ def _print_message(m: "Machine", a: list) -> bool:
     with_output_to/2 capture), as SWI-Prolog's (:func:`message_text`)."""
     text = message_text(a[0], a[1], m.deadline)
     if text is not None:
-        sys.stderr.write(text)
+        (m.engine.err or sys.stderr).write(text)
     return True
 
 

@@ -1281,8 +1281,9 @@ class ShellState:
 class Shell:
     """The interactive loop, independent of where lines come from (prompt or plain stdin).
 
-    ``ask`` reads the key a person presses after an answer (None: every answer is printed,
-    one per line, for piped input)."""
+    ``ask`` reads the response to an answer: the key a person presses (:func:`read_key`),
+    or a line of piped input (:class:`PipedInput`). None: every answer is printed, one per
+    line (a knowledge base without ``solutions``)."""
 
     def __init__(self, kb: KnowledgeBaseAPI, echo: Any = click.echo, echo_err: Any = _err,
                  ask: Any = None):
@@ -1526,6 +1527,8 @@ class Shell:
             for line in answer_lines(answers):
                 self.echo(line)
             return
+        # (lazily: an answer is printed as it is found, so a goal with endless answers,
+        # `repeat.`, shows its first at once and the next only when asked)
         self._one_at_a_time(self.kb.solutions(goal, at=self.at))
 
     def _one_at_a_time(self, answers: Iterator[dict[str, Any]]) -> None:
@@ -1553,6 +1556,57 @@ class Shell:
             close = getattr(answers, "close", None)
             if close is not None:
                 close()
+
+
+class PipedInput:
+    """The lines of a shell's standard input that is no terminal (a pipe, a file): its goals
+    and, after each answer, the response to it, read from the same input as SWI-Prolog's
+    top level reads it there (a line each).
+
+    :meth:`response` is the shell's ``ask``: a line ``;`` (or ``n``, ``r``) asks for the next
+    answer, ``w`` shows the answer in full, an empty line, ``.`` (or ``c``, ``a``) or the
+    end of the input stops. Any other line stops the answers too and is not used up: it is
+    the next goal (SWI-Prolog said "Unknown action" and ate it), so a script of goals, one a
+    line, runs each goal to its first answer.
+
+    >>> import io
+    >>> piped = PipedInput(io.StringIO("  ;\\nw\\n\\nX = 1.\\n"))
+    >>> [piped.response() for _ in range(4)], list(piped)
+    ([';', 'w', '.', '.'], ['X = 1.\\n'])
+    """
+
+    NEXT = frozenset(";nr")
+    STOP = frozenset(("", ".", "c", "a"))
+
+    def __init__(self, stream: Any):
+        self.stream = stream
+        self.pushed_back: str | None = None
+
+    def __iter__(self) -> Iterator[str]:
+        return self
+
+    def __next__(self) -> str:
+        if self.pushed_back is not None:
+            line, self.pushed_back = self.pushed_back, None
+            return line
+        line = self.stream.readline()
+        if not line:
+            raise StopIteration
+        return line
+
+    def response(self) -> str:
+        """The response to an answer (see the class's text); EOFError at the end."""
+        line = next(self, "")
+        if not line:
+            raise EOFError
+        key = line.strip()
+        if key in self.NEXT:
+            return ";"
+        if key == "w":
+            return "w"
+        if key not in self.STOP:
+            self.pushed_back = line   # a goal, not a response: the shell reads it next
+        return "."
 
 
 def read_key(stream: Any = None) -> str:
@@ -1651,9 +1705,11 @@ def shell(db: str) -> None:
     """Interactive goals and program text on DB (history in ~/.slr_history or $SLR_HISTORY)."""
     with _open(db, create=False) as kb:
         if not sys.stdin.isatty():
-            session = Shell(kb)
-            # Piped input (scripts, tests): plain lines, no prompt, no history file.
-            for line in sys.stdin:
+            # Piped input (scripts, tests): plain lines, no prompt, no history file; the
+            # response to an answer is a line of the same input (PipedInput)
+            piped = PipedInput(sys.stdin)
+            session = Shell(kb, ask=piped.response)
+            for line in piped:
                 if not session.feed(line):
                     break
             if session.state == ShellState.CONSULTING:

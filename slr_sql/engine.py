@@ -95,6 +95,7 @@ class Engine:
         self.det = _b.DET
         self.nondet = _b.NONDET
         self.out = None  # where write/1 & co. print; None = sys.stdout
+        self.err = None  # where print_message/2 and user_error print; None = sys.stderr
         # {(name, arity): callable(machine, args) -> rows or None}: predicates whose calls
         # the SQL compiler answers (slr_sql.planner.CompiledCall); use_sql switches them off
         self.sql_calls: dict = {}

@@ -238,12 +238,12 @@ def test_shell_reads_plain_lines_when_stdin_is_not_a_terminal(db, tmp_path):
     r = slr("shell", db, stdin=script)
     assert r.returncode == 0, r.stderr
     out = r.stdout.splitlines()
-    assert "C = red" in out
-    assert "C = green" in out
-    assert "X = tea" in out
+    assert "C = red ." in out
+    assert "C = green ." in out
+    assert "X = tea ." in out
     assert "false." in out
-    assert "L = [red]" in out
-    assert out.count("C = green") == 1
+    assert "L = [red] ." in out
+    assert out.count("C = green .") == 1
     assert "^" in r.stderr  # the syntax error was shown with its caret, and the shell went on
 
 

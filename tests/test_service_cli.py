@@ -63,7 +63,7 @@ def test_every_db_command_takes_the_url(secured, tmp_path):
     r = slr("stats", url, env=env)
     assert r.returncode == 0 and "seg/2: 2 stored" in r.stdout, r.stderr
     r = slr("shell", url, stdin="add obj(cup3, cup, blue)^3.\ncolor(cup3, C)^4.\n", env=env)
-    assert r.stdout.splitlines() == ["added.", "C = blue"], r.stderr
+    assert r.stdout.splitlines() == ["added.", "C = blue ."], r.stderr
 
 
 @pytest.mark.parametrize("args, env, words", [

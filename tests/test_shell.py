@@ -450,7 +450,7 @@ def test_only_directives_are_program_text_a_goal_with_neck_is_a_goal(store):
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines() == [
         "true.",
-        "X = cup1",
+        "X = cup1 .",
         "true.",                                 # retracted, not stored as a clause
         "% the program 'user' is empty",
         "true.",
@@ -475,13 +475,13 @@ def test_consult_assert_asserta_retract_and_listing(store):
                   "asserta(near(cup0)).",
                   "assertz(near(cup9)).",
                   "retract(near(cup2)).",
-                  "near(X).",
+                  "near(X).", ";", ";", ";",
                   "listing(near/1).",
                   "retract(near(nothing)).")
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     assert lines[lines.index("true.") + 3:] == [
-        "X = cup0", "X = cup1", "X = cup9",
+        "X = cup0 ;", "X = cup1 ;", "X = cup9 ;", "false.",
         "near(cup0).   % user", "near(cup1).   % user", "near(cup9).   % user",
         "false."]
     # what the shell changed is the store's program 'user', seen by every later process
@@ -546,8 +546,8 @@ def test_a_comment_after_the_full_stop_ends_the_goal_and_a_full_stop_inside_one_
                   "X = a\x00b.")                    # no token: its error, not a wait
     assert r.returncode == 0, r.stderr
     assert r.stderr.startswith("<shell>:1:6: unexpected character") and r.stderr.count("\n") == 3
-    assert r.stdout.splitlines() == ["L = table, T = 1.0", "X = 1", "X = 2, Y = 3", "true.",
-                                     "N = a", "X = 'a. b'", "X = 'a.\\nb'"]
+    assert r.stdout.splitlines() == ["L = table, T = 1.0 .", "X = 1 .", "X = 2, Y = 3 .",
+                                     "true.", "N = a .", "X = 'a. b' .", "X = 'a.\\nb' ."]
 
 
 def test_a_comment_after_the_full_stop_in_the_terminal(store):
@@ -615,7 +615,7 @@ def test_an_answer_nested_deeper_than_pythons_recursion_is_printed(tmp_path):
     assert query.returncode == 0, query.stderr
     assert query.stdout.splitlines() == [expected]
     piped = run_piped(db, "deep(X).", "Y = ok.")
-    assert piped.stderr == "" and piped.stdout.splitlines() == [expected, "Y = ok"]
+    assert piped.stderr == "" and piped.stdout.splitlines() == [expected + " .", "Y = ok ."]
     child = spawn_shell(db)
     child.sendline("deep(X), L = [1,2,3,4,5,6,7,8,9,10,11].")
     child.expect(r"X = (f\()+a")
@@ -630,22 +630,23 @@ def test_end_of_file_with_a_comment_after_it_ends_the_consult(store):
     r = run_piped(store, "[user].", "q(1).", "end_of_file.  % done", "q(X).")
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines() == ["% type clauses; end_of_file. or Ctrl-D ends",
-                                     "% consulted into the program 'user'", "X = 1"]
+                                     "% consulted into the program 'user'", "X = 1 ."]
 
 
 def test_at_nan_is_refused_at_once_in_the_queries_words_and_the_view_stays(store):
     """`at nan` was echoed as a stream view, and then every goal failed with "at must be a
     number of seconds, not nan". It is refused as it is typed, in those words, and the view
     set before stays; `at inf` is a view queries take (every stored event)."""
-    r = run_piped(store, "at 1", "at nan", "seg(X, P)^T.", "at inf", "seg(X, P)^T.")
+    r = run_piped(store, "at 1", "at nan", "seg(X, P)^T.", "at inf", "seg(X, P)^T.", ";", ";")
     assert r.returncode == 0, r.stderr
     assert r.stderr == "error: at must be a number of seconds, not nan\n"
     assert r.stdout.splitlines() == [
         "stream view: at 1",
-        "X = cup1, P = table, T = 1.0",
+        "X = cup1, P = table, T = 1.0 .",
         "stream view: at inf",
-        "X = cup1, P = table, T = 1.0",
-        "X = cup2, P = shelf, T = 2.0",
+        "X = cup1, P = table, T = 1.0 ;",
+        "X = cup2, P = shelf, T = 2.0 ;",
+        "false.",
     ]
 
 
@@ -654,4 +655,110 @@ def test_at_that_is_no_number_is_refused_in_words_and_the_view_stays(store):
     r = run_piped(store, "at 1", "at soon", "seg(X, P)^T.")
     assert r.returncode == 0, r.stderr
     assert r.stderr == "error: at takes a number of seconds (or none), not soon\n"
-    assert r.stdout.splitlines() == ["stream view: at 1", "X = cup1, P = table, T = 1.0"]
+    assert r.stdout.splitlines() == ["stream view: at 1", "X = cup1, P = table, T = 1.0 ."]
+
+
+class PipedShell:
+    """`slr shell DB` with its standard input a pipe kept open: a line is sent, and what the
+    shell prints is read as it comes, up to a deadline (never all of it at the end)."""
+
+    def __init__(self, db: str):
+        import subprocess
+        env = dict(os.environ, PYTHONPATH=str(ROOT), SLR_HISTORY=os.devnull)
+        self.proc = subprocess.Popen([sys.executable, "-m", "slr_sql", "shell", db],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, env=env, cwd=str(ROOT))
+        self.out = b""
+
+    def send(self, line: str) -> None:
+        self.proc.stdin.write(line.encode() + b"\n")
+        self.proc.stdin.flush()
+
+    def expect(self, text: str, deadline: float = 60) -> str:
+        """Read until ``text`` has come; what came up to its end (the rest is kept)."""
+        import select
+        end = time.monotonic() + deadline
+        fd = self.proc.stdout.fileno()
+        while text.encode() not in self.out:
+            left = end - time.monotonic()
+            assert left > 0, f"{text!r} did not come; the shell printed {self.out!r}"
+            if select.select([fd], [], [], left)[0]:
+                chunk = os.read(fd, 4096)
+                assert chunk, f"the shell ended before {text!r}: {self.out!r}"
+                self.out += chunk
+        upto = self.out.index(text.encode()) + len(text)
+        came, self.out = self.out[:upto], self.out[upto:]
+        return came.decode()
+
+    def end(self) -> tuple[str, str]:
+        """Close the input: the rest of the output and the errors; the shell ended (0)."""
+        rest, errors = self.proc.communicate(timeout=60)   # (which closes the input)
+        assert self.proc.returncode == 0, errors
+        return (self.out + rest).decode(), errors.decode()
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate(timeout=60)
+
+
+def test_piped_goal_with_endless_answers_prints_its_first_at_once_and_reads_the_response(
+        store):
+    """`repeat.` or `length(L, N).` piped in ran for ever and printed nothing: the shell
+    collected every answer before printing. An answer is printed as it is found, and the
+    response to it (`;` the next, an empty line stop) is a line of the same input, as
+    SWI-Prolog's top level reads it when its input is no terminal."""
+    shell = PipedShell(store)
+    try:
+        shell.send("repeat.")
+        assert shell.expect("true") == "true"
+        shell.send(";")
+        assert shell.expect("true") == " ;\ntrue"
+        shell.send("")
+        assert shell.expect(" .\n") == " .\n"
+        shell.send("length(L, N).")
+        assert shell.expect("N = 0") == "L = [], N = 0"
+        shell.send(";")
+        assert shell.expect("N = 1").startswith(" ;\nL = [")
+        shell.send("seg(O, L)^T.")        # no response: the next goal, the answers stop
+        assert shell.expect("O = cup1, L = table, T = 1.0") == " .\nO = cup1, L = table, T = 1.0"
+        out, errors = shell.end()         # the end of the input stops the answers too
+    finally:
+        shell.kill()
+    assert out == " .\n" and errors == ""
+
+
+def test_piped_responses_next_full_answer_stop_and_a_goal_in_their_place(store):
+    r = run_piped(store,
+                  "member(X, [1, 2, 3]).", ";", "n", ";",       # every answer, then false
+                  "numlist(1, 12, L).", "w", ".",                # in full, then stop
+                  "member(X, [a, b]).", "  ;  ", "c",            # (blanks around the key)
+                  "member(X, [a, b]).",
+                  "X = next.",                                   # a goal: stops, then runs
+                  "",
+                  "member(X, [1, 0]), Y is 1 / X.", ";",          # an error after an answer
+                  "X = last.")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == [
+        "X = 1 ;", "X = 2 ;", "X = 3 ;", "false.",
+        "L = [1,2,3,4,5,6,7,8,9|...]", "L = [1,2,3,4,5,6,7,8,9,10,11,12] .",
+        "X = a ;", "X = b .",
+        "X = a .",
+        "X = next .",
+        "X = 1, Y = 1 ;",
+        "X = last .",
+    ]
+    assert r.stderr == "error: arithmetic: division by zero\n"
+
+
+def test_piped_goal_past_the_servers_query_time_ends_in_words(tmp_path):
+    """The shell given a server's URL: `repeat.` runs into the server's time limit, which
+    the shell says in words; it goes on with the next goal."""
+    from service_helpers import ServiceProcess
+
+    with ServiceProcess(tmp_path / "robot.db", "--max-query-time", "0.5") as server:
+        r = slr("shell", server.url, stdin="repeat.\nX = 1.\n")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "X = 1 .\n"
+    assert r.stderr.startswith("error: ") and "0.5" in r.stderr and "\n" == r.stderr[-1] \
+        and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr

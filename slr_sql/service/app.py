@@ -45,6 +45,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
 from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql.builtins import DiscardedOutput
 from slr_sql.errors import log_failure
 from slr_sql.printable import log_text
 from slr_sql.kb import KnowledgeBase
@@ -503,6 +504,16 @@ class _Service:
         synchronizer = getattr(kb, "synchronizer", None)
         if synchronizer is not None:
             synchronizer.watch_external()
+        # What a query writes (write/1, format/2, print_message/2, user_error) would go to
+        # the server's stdout and stderr, its operator's logs: any client that may query
+        # could write text of its choice there. The answer has no place for it (SPEC §8:
+        # the client returns what the local knowledge base returns), so it is dropped, for
+        # every query the served knowledge base runs (requests, synchronized queries, rules
+        # and subscriptions run by an add); with_output_to/2 and format/3 still give the
+        # text to the query as a binding
+        engine = getattr(kb, "engine", None)
+        if engine is not None:
+            engine.out = engine.err = DiscardedOutput()
 
     # -- plumbing -----------------------------------------------------------------------------
     async def body(self, request: Request) -> dict:
