@@ -98,6 +98,9 @@ def test_a_wait_left_registered_on_a_closed_loop_is_not_waited_on(kb):
     async def wait_for_the_next() -> list:
         waiting = asyncio.ensure_future(sub.next_answers(10))
         await asyncio.sleep(0)
+        # (it waits, on this loop, before the answer comes: the answer must wake it)
+        assert sub._async_waiter is not None and not waiting.done()
+        assert sub._async_waiter[0] is asyncio.get_running_loop()
         await asyncio.get_running_loop().run_in_executor(None, kb.add, "p(2)^2")
         return await asyncio.wait_for(waiting, DEADLINE)
     assert [a["X"] for a in asyncio.run(wait_for_the_next())] == [2]
@@ -288,6 +291,8 @@ def test_next_answers_after_take_answers_waits_on_its_own_future(kb):
         async def then_next() -> list:
             task = asyncio.ensure_future(sub.next_answers(10))
             await asyncio.sleep(0)               # it waits: nothing is queued
+            assert sub._async_waiter is not None and sub._async_waiter[0] is loop
+            assert not task.done()
             await loop.run_in_executor(None, kb.add, "p(2)^2")
             return await asyncio.wait_for(task, DEADLINE)
         assert [a["X"] for a in loop.run_until_complete(then_next())] == [2]
