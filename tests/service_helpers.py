@@ -229,6 +229,22 @@ class DroppingServer:
 
 
 @contextlib.contextmanager
+def reserved_port() -> Iterator[int]:
+    """A port of 127.0.0.1 held for the test, on which nobody listens until ``slr serve
+    --port PORT`` does: bound with SO_REUSEADDR and not listening. Linux refuses a connection
+    to it (no listener), gives it to no other socket (``bind`` to port 0 and outgoing
+    connections skip a bound port; a bind to it without SO_REUSEADDR is refused), and lets a
+    socket with SO_REUSEADDR (the server's, ``listen_on``) bind and listen beside it -- again
+    after that server died. A port closed first and served later could be another worker's
+    server's meanwhile (``with reserved_port() as port: ServiceProcess(db, "--port",
+    str(port))``)."""
+    with socket.socket() as placeholder:
+        placeholder.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        placeholder.bind(("127.0.0.1", 0))
+        yield placeholder.getsockname()[1]
+
+
+@contextlib.contextmanager
 def listener_with_full_queue() -> Iterator[int]:
     """The port of a listening socket whose accept queue is full: the kernel drops the next
     connection attempt, so connecting to it times out (nothing reaches a server)."""

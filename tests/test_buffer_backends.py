@@ -134,15 +134,16 @@ def test_concurrent_writers_keep_the_count_of_a_key(postgres_url):
             first.add("p(a, 2)^2")
             writer = threading.Thread(target=write)
             writer.start()
-            # until the second writer has finished or waits on a lock (a deadline, no pause)
+            # until the second writer waits on a lock (a deadline, no pause): the first's
+            # transaction is open, so a writer that finishes meanwhile did not wait for it
             with psycopg.connect(postgres_url, autocommit=True) as watch:
                 deadline = time.monotonic() + 20.0
-                while not done.is_set() and time.monotonic() < deadline:
-                    waiting = watch.execute(
+                while not watch.execute(
                         "SELECT count(*) FROM pg_stat_activity WHERE datname = "
-                        "current_database() AND wait_event_type = 'Lock'").fetchone()[0]
-                    if waiting:
-                        break
+                        "current_database() AND wait_event_type = 'Lock'").fetchone()[0]:
+                    assert not done.is_set(), \
+                        f"the second writer finished without waiting for the first: {errors}"
+                    assert time.monotonic() < deadline, "the second writer never waited on a lock"
                     done.wait(0.01)
         writer.join(20.0)
         assert not writer.is_alive() and errors == []

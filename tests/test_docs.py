@@ -225,8 +225,11 @@ def test_the_buffer_example_loads_as_one_program():
     """The declarations block of language.md is one program: no two of its buffers clash
     (two buffers whose patterns unify are an error when loaded)."""
     (text,) = [t for _, t in LANGUAGE_BLOCKS if "cBuffer" in t]
+    declared = [line.split("(", 1)[0] for line in text.splitlines()
+                if line.startswith(("tBuffer(", "cBuffer("))]
     with slr_sql.open() as kb:
         kb.load(text)
+        assert [info.kind for info in kb.buffers()] == declared   # every one, as declared
 
 
 # ------------------------------------------------------------------------ README.md

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import signal
-import socket
 import sqlite3
 import subprocess
 import sys
@@ -16,7 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from service_helpers import HTTP, ServiceProcess, slr_env
+from service_helpers import HTTP, ServiceProcess, reserved_port, slr_env
 
 import slr_sql
 from slr_sql import fleet, planner
@@ -521,12 +520,6 @@ def test_a_pusher_killed_mid_batch_loses_nothing_and_ships_nothing_twice(tmp_pat
     assert rows() == rows_of(robot_db)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
     """The pusher follows a fleet URL nobody answers: the robot's adds go on, the outage is
     said once; the fleet's server starts, is killed mid-stream, restarts: every event
@@ -534,64 +527,66 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
     robot_db, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"
     with opened(robot_db, robot="r1"):
         pass
-    port = free_port()
-    url = f"http://127.0.0.1:{port}"
-    log = open(tmp_path / "push.log", "w")
-    pusher = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
-                               url, "--follow", "--batch", "500"], env=slr_env(), cwd=ROOT,
-                              stdout=log, stderr=subprocess.STDOUT)
-    try:
-        wait_until(lambda: "unreachable" in (tmp_path / "push.log").read_text(),
-                   "the pusher to notice the outage")
-        started = time.monotonic()
-        write_robot(robot_db, "r1", 6000, 200)      # 30 transactions, none waits
-        assert time.monotonic() - started < 60
-        server = ServiceProcess(fleet_db, "--port", str(port))
+    # the port is held for the whole test (refused while no server runs): closed, another
+    # worker's server could be given it before this one's start or restart
+    with reserved_port() as port:
+        url = f"http://127.0.0.1:{port}"
+        log = open(tmp_path / "push.log", "w")
+        pusher = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
+                                   url, "--follow", "--batch", "500"], env=slr_env(), cwd=ROOT,
+                                  stdout=log, stderr=subprocess.STDOUT)
         try:
-            wait_until(lambda: fleet_count(fleet_db) == 6000, "the backlog to arrive")
-            server.kill()
-            write_robot(robot_db, "r1", 2000, 200)  # w0..w1999 again: 2000 more rows
+            wait_until(lambda: "unreachable" in (tmp_path / "push.log").read_text(),
+                       "the pusher to notice the outage")
+            started = time.monotonic()
+            write_robot(robot_db, "r1", 6000, 200)      # 30 transactions, none waits
+            assert time.monotonic() - started < 60
+            server = ServiceProcess(fleet_db, "--port", str(port))
+            try:
+                wait_until(lambda: fleet_count(fleet_db) == 6000, "the backlog to arrive")
+                server.kill()
+                write_robot(robot_db, "r1", 2000, 200)  # w0..w1999 again: 2000 more rows
+            finally:
+                server.stop()
+            server = ServiceProcess(fleet_db, "--port", str(port))
+            try:
+                wait_until(lambda: fleet_count(fleet_db) == 8000, "the second backlog")
+                pusher.send_signal(signal.SIGTERM)
+                assert pusher.wait(timeout=DEADLINE) == 0
+                with slr_sql.connect(url) as client:
+                    # asking the fleet through the service, per robot
+                    # (both writes stored w7 at 7.0: prev gives the tied rows)
+                    assert client.query("origin(R, prev(seen(pallet7, W)^T, 10))") == [
+                        {"R": "r1", "W": "w7", "T": 7.0}] * 2
+                    assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
+                    assert client.query("seen(pallet7, W)^T", robot="r2") == []
+                    # synchronized and per robot: the history up to 10 is long complete
+                    now = client.query("seen(pallet7, W)^T", at=10, robot="r1")
+                    assert now and client.query("seen(pallet7, W)^T", at=10, wait=True,
+                                                robot="r1") == now
+                    reply = HTTP.post(url + "/query", json={"goal": "seen(P, W)^T", "wait": True,
+                                                             "at": 10, "robot": "r2"}, timeout=30)
+                    assert reply.status_code == 200 and reply.json()["answers"] == []
+                    # a malformed shipment is refused with its reason and changes nothing
+                    for bad in ([["seen", 2, [[9001, "a", 1.0, 1.0, 1.0, None]]]],   # short
+                                [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
+                                [["seen", 2, [[9, "a", "b", 1.0, 1.0, 1.0, None],
+                                              [8, "a", "b", 1.0, 1.0, 1.0, None]]]], "x"):
+                        reply = HTTP.post(url + "/fleet/receive",
+                                          json={"robot": "r1", "batches": bad}, timeout=30)
+                        assert reply.status_code == 400, reply.text
+                        assert any(w in reply.text for w in ("shipment", "shipped row", "batches"))
+                    status = client.fleet_status()
+                    assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
+                        ("r1", 8000, 0)]
+                assert fleet_count(fleet_db) == 8000
+            finally:
+                server.stop()
         finally:
-            server.stop()
-        server = ServiceProcess(fleet_db, "--port", str(port))
-        try:
-            wait_until(lambda: fleet_count(fleet_db) == 8000, "the second backlog")
-            pusher.send_signal(signal.SIGTERM)
-            assert pusher.wait(timeout=DEADLINE) == 0
-            with slr_sql.connect(url) as client:
-                # asking the fleet through the service, per robot
-                # (both writes stored w7 at 7.0: prev gives the tied rows)
-                assert client.query("origin(R, prev(seen(pallet7, W)^T, 10))") == [
-                    {"R": "r1", "W": "w7", "T": 7.0}] * 2
-                assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
-                assert client.query("seen(pallet7, W)^T", robot="r2") == []
-                # synchronized and per robot: the history up to 10 is long complete
-                now = client.query("seen(pallet7, W)^T", at=10, robot="r1")
-                assert now and client.query("seen(pallet7, W)^T", at=10, wait=True,
-                                            robot="r1") == now
-                reply = HTTP.post(url + "/query", json={"goal": "seen(P, W)^T", "wait": True,
-                                                         "at": 10, "robot": "r2"}, timeout=30)
-                assert reply.status_code == 200 and reply.json()["answers"] == []
-                # a malformed shipment is refused with its reason and changes nothing
-                for bad in ([["seen", 2, [[9001, "a", 1.0, 1.0, 1.0, None]]]],   # short
-                            [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
-                            [["seen", 2, [[9, "a", "b", 1.0, 1.0, 1.0, None],
-                                          [8, "a", "b", 1.0, 1.0, 1.0, None]]]], "x"):
-                    reply = HTTP.post(url + "/fleet/receive",
-                                      json={"robot": "r1", "batches": bad}, timeout=30)
-                    assert reply.status_code == 400, reply.text
-                    assert any(w in reply.text for w in ("shipment", "shipped row", "batches"))
-                status = client.fleet_status()
-                assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
-                    ("r1", 8000, 0)]
-            assert fleet_count(fleet_db) == 8000
-        finally:
-            server.stop()
-    finally:
-        if pusher.poll() is None:
-            pusher.kill()
-            pusher.wait()
-        log.close()
+            if pusher.poll() is None:
+                pusher.kill()
+                pusher.wait()
+            log.close()
     said = (tmp_path / "push.log").read_text()
     assert said.count("unreachable") == 2, said          # one message per outage
     assert said.count("reachable again") == 2, said

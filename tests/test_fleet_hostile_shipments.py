@@ -13,7 +13,7 @@ import subprocess
 import sys
 
 import pytest
-from service_helpers import HTTP, ServiceProcess, slr_env
+from service_helpers import HTTP, ServiceProcess, reserved_port, slr_env
 
 import slr_sql
 from slr_sql import fleet
@@ -198,21 +198,25 @@ def test_a_batch_sent_after_a_position_the_fleet_no_longer_holds_is_a_conflict(s
         assert getattr(caught.value, "kind", None) == "Conflict"
 
 
-def test_a_fleet_store_replaced_behind_a_following_pusher_gets_every_event(tmp_path):
+@pytest.fixture
+def port():
+    """A port held for the test, on which ``slr serve --port`` starts and restarts: closed
+    first, another worker's server could be given it in between (``reserved_port``)."""
+    with reserved_port() as held:
+        yield held
+
+
+def test_a_fleet_store_replaced_behind_a_following_pusher_gets_every_event(tmp_path, port):
     """The fleet's server restarts on an empty (or restored) store at the same URL between
     two rounds: the pusher, whose HTTP client reconnects without a word, kept the positions
     it had asked for and shipped only what came after them -- the events before were never
     shipped to the new store. Now the store answers Conflict and the pusher asks again."""
-    import socket
     import threading
     import time
 
     robot, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"
     with slr_sql.open(robot, robot="r1", clock=slr_sql.ManualClock(100)) as kb:
         kb.add_many([f"seen(p{i})^{i}" for i in range(10)])
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
 
     def held(url: str) -> int:
         with slr_sql.connect(url) as client:
@@ -251,18 +255,14 @@ def test_a_fleet_store_replaced_behind_a_following_pusher_gets_every_event(tmp_p
         any("reachable again" in line for line in said), said
 
 
-def test_a_pusher_whose_fleet_store_was_replaced_between_two_rounds_ships_it_all(tmp_path):
+def test_a_pusher_whose_fleet_store_was_replaced_between_two_rounds_ships_it_all(tmp_path, port):
     """Between two rounds of one pusher the fleet's server restarts on an empty store at
     the same URL: the pusher's HTTP client reconnects without a word, and its positions are
     the old store's; the new store answers Conflict, the pusher says so, asks the positions
     again and ships every event, not only those after its old positions."""
-    import socket
     import threading
 
     robot, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
     said: list[str] = []
     stop = threading.Event()
     server = ServiceProcess(fleet_db, "--port", str(port))

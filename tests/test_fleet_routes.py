@@ -175,11 +175,15 @@ def test_two_routes_taken_at_once_on_postgresql_let_one_through(robots, postgres
     thread = threading.Thread(target=relay)
     thread.start()
     try:
+        # until the relay waits for the other's route (committed before it got there, the
+        # refusal would say nothing of the wait)
         deadline = time.monotonic() + 60
         with psycopg.connect(split_url(central)[0], autocommit=True) as watcher:
-            while time.monotonic() < deadline and not watcher.execute(
+            while not watcher.execute(
                     "SELECT 1 FROM pg_stat_activity WHERE wait_event_type = 'Lock' AND "
                     "query LIKE '%slr_fleet_routes%'").fetchall():
+                assert thread.is_alive(), f"the relay ended without waiting: {raised}"
+                assert time.monotonic() < deadline, "the relay never waited for the route"
                 time.sleep(0.01)
         other.commit()
     finally:

@@ -413,6 +413,7 @@ def test_a_burst_of_more_than_two_pages_is_sent_without_waiting_for_another_chan
             client.subscribe("/p/1")
             probe = 0
             while not client.on("/p/1"):   # (until the subscription is in place)
+                assert time.monotonic() < deadline, "the subscription never took effect"
                 probe -= 1
                 with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
                     kb.add_many([("p", (probe,), 0.5, 0.5)])

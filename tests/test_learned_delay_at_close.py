@@ -57,17 +57,20 @@ def test_close_waits_for_the_lock_and_then_writes_the_delay(postgres_url):
     other = psycopg.connect(postgres_url)
     other.execute("LOCK TABLE slr.slr_meta IN SHARE MODE")
     released = threading.Event()
+    close_waited = threading.Event()   # (let go at the deadline otherwise: asserted below)
 
     def release_once_close_waits():
         deadline = time.monotonic() + 20
         try:
             with psycopg.connect(postgres_url, autocommit=True) as watcher:
                 # (each look a round trip to the server, bounded by the deadline)
-                while time.monotonic() < deadline and not watcher.execute(
-                        "SELECT count(*) FROM pg_locks WHERE NOT granted AND database = "
-                        "(SELECT oid FROM pg_database WHERE datname = current_database())"
-                        ).fetchone()[0]:
-                    pass
+                while time.monotonic() < deadline:
+                    if watcher.execute(
+                            "SELECT count(*) FROM pg_locks WHERE NOT granted AND database = "
+                            "(SELECT oid FROM pg_database WHERE datname = current_database())"
+                            ).fetchone()[0]:
+                        close_waited.set()
+                        break
         finally:
             other.rollback()
             other.close()
@@ -79,4 +82,5 @@ def test_close_waits_for_the_lock_and_then_writes_the_delay(postgres_url):
         kb.close()                              # (written: no warning)
     assert released.wait(30)
     holder.join(30)
+    assert close_waited.is_set(), "close's write never waited for the other's lock"
     assert _stored_delay(postgres_url) == pytest.approx(0.5004)

@@ -46,7 +46,8 @@ def _heard_of_it(kb, before: int) -> None:
     """Until the store has heard that another connection changed the pending rows (on
     PostgreSQL the notification crosses the server: a deadline, not a pause)."""
     deadline = time.monotonic() + 30
-    while kb.store.others_version() == before and time.monotonic() < deadline:
+    while kb.store.others_version() == before:
+        assert time.monotonic() < deadline, "the other connection's change was never heard"
         time.sleep(0.005)
 
 

@@ -155,3 +155,68 @@ def _count_waiting_for_lock(admin_url: str) -> int:
         return conn.execute(
             "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock' "
             "AND query LIKE %s", ("%AS tag_locked%",)).fetchone()[0]
+
+
+def test_a_statement_still_connecting_when_the_store_closes_is_never_sent(
+        postgres_url, postgres_server):
+    """A statement whose thread still connects when the store closes (its stop): the caller
+    has the close's error at once, and once connected the thread sends nothing -- no cancel
+    could reach a connection it did not have yet, so the statement ran anyway (and the
+    close's cancels went on at it). Its connection is held in a login event trigger that
+    waits for an advisory lock the test holds; the statement calls a function whose calls
+    the server counts."""
+    from psycopg import sql
+
+    from slr_sql.errors import CLOSED_WHILE_RUNNING
+
+    kb = slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0))
+    # (connected before the trigger exists: the trigger holds only the connections after)
+    holder = psycopg.connect(postgres_url, autocommit=True)
+    try:
+        holder.execute("SELECT pg_advisory_lock(4711)")
+        holder.execute("CREATE FUNCTION public.slr_test_probe() RETURNS int LANGUAGE plpgsql "
+                       "AS $$ BEGIN RETURN 1; END $$")
+        holder.execute("CREATE FUNCTION public.slr_test_held_login() RETURNS event_trigger "
+                       "LANGUAGE plpgsql AS $$ BEGIN PERFORM pg_advisory_xact_lock_shared(4711);"
+                       " END $$")
+        database = holder.execute("SELECT current_database()").fetchone()[0]
+        holder.execute(sql.SQL("ALTER DATABASE {} SET track_functions = 'all'").format(
+            sql.Identifier(database)))
+        holder.execute("CREATE EVENT TRIGGER slr_test_held_login ON login "
+                       "EXECUTE FUNCTION public.slr_test_held_login()")
+        outcome: dict = {}
+
+        def ask() -> None:
+            try:
+                outcome["answer"] = kb.sql("SELECT public.slr_test_probe() AS probe")
+            except BaseException as exc:   # (asserted below)
+                outcome["error"] = exc
+        asking = threading.Thread(target=ask)
+        asking.start()
+        with psycopg.connect(postgres_server[1], autocommit=True) as watcher:
+            deadline = time.monotonic() + 60
+            while not (held := watcher.execute(
+                    "SELECT pid FROM pg_locks WHERE locktype = 'advisory' AND objid = 4711 "
+                    "AND NOT granted").fetchall()):
+                assert asking.is_alive(), outcome
+                assert time.monotonic() < deadline, "the statement's connection never waited"
+                asking.join(0.02)   # (polling the server's sessions: the deadline bounds it)
+            ((connecting,),) = held
+            kb.close()                                   # its thread still connects
+            asking.join(60)
+            assert not asking.is_alive()
+            error = outcome.get("error")
+            assert type(error) is slr_sql.SLRError and str(error) == CLOSED_WHILE_RUNNING, outcome
+            holder.execute("SELECT pg_advisory_unlock(4711)")   # it connects now
+            while watcher.execute("SELECT count(*) FROM pg_stat_activity WHERE pid = %s",
+                                  (connecting,)).fetchone()[0]:
+                assert time.monotonic() < deadline, "the statement's session never ended"
+                threading.Event().wait(0.02)   # (a pause between two looks, as above)
+        # (a session's counts reach the server's statistics before it leaves pg_stat_activity)
+        calls = holder.execute("SELECT coalesce(sum(calls), 0) FROM pg_stat_user_functions "
+                               "WHERE funcname = 'slr_test_probe'").fetchone()[0]
+        assert calls == 0, "the statement was sent after the store had closed"
+    finally:
+        holder.execute("DROP EVENT TRIGGER IF EXISTS slr_test_held_login")
+        holder.close()
+        kb.close()

@@ -204,7 +204,8 @@ def test_a_deadlock_the_server_breaks_is_busy(kb, shared_url):
         def take_b_when_held() -> None:
             deadline = time.monotonic() + DEADLINE
             while not watcher.execute(got_b).fetchone()[0]:
-                if time.monotonic() > deadline:
+                if time.monotonic() > deadline:   # (failed by the assertion below)
+                    waited.append(AssertionError("the store's session never held lock B"))
                     return
                 time.sleep(0.005)
             try:

@@ -35,6 +35,17 @@ def kb(tmp_path):
         yield kb
 
 
+async def _turns_until(condition, what: str) -> None:
+    """Give the event loop turns until ``condition()`` holds: its tasks need a few turns, not
+    time, so a thousand turns without it fail the test (not a hang until the suite's
+    timeout)."""
+    for _ in range(1000):
+        if condition():
+            return
+        await asyncio.sleep(0)
+    raise AssertionError(f"not within 1000 turns of the event loop: {what}")
+
+
 def drained(kb) -> None:
     assert kb._subscriptions.drain(DEADLINE)
 
@@ -75,8 +86,8 @@ def test_a_batch_that_empties_the_queue_registers_the_next_calls_wait(kb):
         await loop.run_in_executor(None, drained, kb)
         second = await asyncio.wait_for(sub.next_answers(10), DEADLINE)
         waiting = asyncio.ensure_future(sub.next_answers(10))
-        while sub._async_waiter is None or sub._queue:
-            await asyncio.sleep(0)
+        await _turns_until(lambda: sub._async_waiter is not None and not sub._queue,
+                           "the wait registered, nothing queued")
         await asyncio.sleep(0)                                  # (it waits now)
         await loop.run_in_executor(None, kb.add, "p(4)^4")     # queued while it waits
         third = await asyncio.wait_for(waiting, DEADLINE)
@@ -98,6 +109,9 @@ def test_a_wait_left_registered_on_a_closed_loop_is_not_waited_on(kb):
     async def wait_for_the_next() -> list:
         waiting = asyncio.ensure_future(sub.next_answers(10))
         await asyncio.sleep(0)
+        # (it waits, on this loop, before the answer comes: the answer must wake it)
+        assert sub._async_waiter is not None and not waiting.done()
+        assert sub._async_waiter[0] is asyncio.get_running_loop()
         await asyncio.get_running_loop().run_in_executor(None, kb.add, "p(2)^2")
         return await asyncio.wait_for(waiting, DEADLINE)
     assert [a["X"] for a in asyncio.run(wait_for_the_next())] == [2]
@@ -288,6 +302,8 @@ def test_next_answers_after_take_answers_waits_on_its_own_future(kb):
         async def then_next() -> list:
             task = asyncio.ensure_future(sub.next_answers(10))
             await asyncio.sleep(0)               # it waits: nothing is queued
+            assert sub._async_waiter is not None and sub._async_waiter[0] is loop
+            assert not task.done()
             await loop.run_in_executor(None, kb.add, "p(2)^2")
             return await asyncio.wait_for(task, DEADLINE)
         assert [a["X"] for a in loop.run_until_complete(then_next())] == [2]
@@ -360,15 +376,14 @@ def test_a_cancelled_wait_leaves_no_waiter_and_the_next_wait_is_woken(kb):
 
     async def cancel_then_take() -> list:
         waiting = asyncio.ensure_future(sub.next_answers(10))
-        while sub._async_waiter is None:          # registered: it waits for the hub
-            await asyncio.sleep(0)
+        await _turns_until(lambda: sub._async_waiter is not None,   # it waits for the hub
+                           "the wait registered")
         waiting.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await waiting
         assert sub._async_waiter is None
         taking = asyncio.ensure_future(sub.next_answers(10))
-        while sub._async_waiter is None:
-            await asyncio.sleep(0)
+        await _turns_until(lambda: sub._async_waiter is not None, "the second wait registered")
         await asyncio.get_running_loop().run_in_executor(None, kb.add, "p(7)^7")
         return await asyncio.wait_for(taking, DEADLINE)
     assert [a["X"] for a in asyncio.run(cancel_then_take())] == [7]
@@ -390,12 +405,10 @@ def test_a_cancelled_waiter_does_not_take_away_the_later_waiters_wake(kb, take):
 
     async def run() -> list:
         first = asyncio.ensure_future(one())
-        while sub._async_waiter is None:
-            await asyncio.sleep(0)
+        await _turns_until(lambda: sub._async_waiter is not None, "the first wait registered")
         mine = sub._async_waiter
         second = asyncio.ensure_future(one())
-        while sub._async_waiter is mine:
-            await asyncio.sleep(0)
+        await _turns_until(lambda: sub._async_waiter is not mine, "the second wait registered")
         first.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await first

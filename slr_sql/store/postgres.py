@@ -1197,14 +1197,29 @@ class DetachedStatements:
             timeout = max(0.001, deadline - time.monotonic())
         outcome: dict[str, Any] = {}
 
+        def connected(new: Any) -> None:
+            """(a new connection) Stop cancels its statement from now on; and once stop
+            ran (while it connected, when no cancel could reach it), nothing is sent."""
+            with self.lock:
+                one.raw = new
+                if one.stopped:
+                    raise SLRError(CLOSED_WHILE_RUNNING)
+
+        def refuse_if_stopped() -> None:
+            # the last look before the statement is sent: a stop from now on is met by its
+            # cancels (again until this thread is done, as a cancel that comes before the
+            # statement is lost)
+            with self.lock:
+                if one.stopped:
+                    raise SLRError(CLOSED_WHILE_RUNNING)
+
         def work() -> None:
             nonlocal raw
             psycopg = _psycopg()
             try:
                 if raw is None:
                     raw = self._connect()
-                    with self.lock:
-                        one.raw = raw   # (stop cancels its statement from now on)
+                    connected(raw)
                     raw.execute("BEGIN READ ONLY")
                 else:
                     try:
@@ -1217,12 +1232,12 @@ class DetachedStatements:
                             raw.close()
                         raw = None
                         raw = self._connect()
-                        with self.lock:
-                            one.raw = raw
+                        connected(raw)
                         raw.execute("BEGIN READ ONLY")
                 try:
                     if timeout is not None:
                         raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
+                    refuse_if_stopped()
                     columns, rows = _one_statement(raw, statement, bound)
                 finally:
                     # (the connection is kept for the next statement: see _leave_nothing)
