@@ -25,6 +25,8 @@ import codecs
 import functools
 import warnings
 
+from ..printable import log_text
+
 ERRORS = "slr-sql-stored-text"
 """The name of the decoding error handler :data:`read_text` decodes with."""
 
@@ -42,7 +44,11 @@ def not_utf8_message(data: bytes) -> str:
     r"""What :class:`StoredTextWarning` says of the stored text ``data``.
 
     >>> print(not_utf8_message(b"gre\xffn"))
-    the store holds text that is no UTF-8 (another program wrote it): "gre\ufffdn", read with U+FFFD in place of the bad bytes; its row is found with the condition instr(CAST(column AS BLOB), x'677265ff6e') > 0
+    the store holds text that is no UTF-8 (another program wrote it): "gre�n", read with U+FFFD in place of the bad bytes; its row is found with the condition instr(CAST(column AS BLOB), x'677265ff6e') > 0
+    >>> print(not_utf8_message(b"\x1b]0;owned\x07\n" + b"x" * 40 + b"\xff"))
+    the store holds text that is no UTF-8 (another program wrote it): "...xxxxxxxxxxxxxxxx�", read with U+FFFD in place of the bad bytes; its row is found with the condition instr(CAST(column AS BLOB), x'78787878787878787878787878787878ff') > 0
+    >>> print(not_utf8_message(b"\x1b]0;owned\x07\n\xff"))
+    the store holds text that is no UTF-8 (another program wrote it): "\x1B\]0;owned\a\n�", read with U+FFFD in place of the bad bytes; its row is found with the condition instr(CAST(column AS BLOB), x'1b5d303b6f776e6564070aff') > 0
     """
     try:
         data.decode("utf-8")
@@ -52,7 +58,9 @@ def not_utf8_message(data: bytes) -> str:
     # (the window may cut a valid character at its edges: "replace" shows that as U+FFFD
     # too, and the bytes in hex are what the condition matches)
     window = data[max(0, start - CONTEXT_BYTES):start + CONTEXT_BYTES]
-    shown = window.decode("utf-8", "replace")
+    # (a stranger's text: its controls escaped, so the warning cannot move a terminal's
+    # cursor or start a log line of its own, wherever it is printed)
+    shown = log_text(window.decode("utf-8", "replace"))
     cut = ("..." if start > CONTEXT_BYTES else "",
            "..." if len(data) > start + CONTEXT_BYTES else "")
     return (f"the store holds text that is no UTF-8 (another program wrote it): "
