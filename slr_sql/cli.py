@@ -31,7 +31,6 @@ from .kb import KnowledgeBase
 from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
 from .arguments import refuse_memory_store
-from .printable import json_float
 from .store import refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
 
@@ -1125,33 +1124,51 @@ SQL_FORMATS = ("table", "csv", "tsv", "json", "nl")
 
 
 def json_cell(value: Any) -> Any:
-    """``value`` (a cell of ``kb.sql``) as ``--json`` and ``--nl`` can write it. SQLite's
-    cells are numbers, text, blobs and NULL; PostgreSQL's come as psycopg reads its types:
-    a NUMERIC (``sum`` or ``avg`` of an integer column) is a Decimal, written as the number
-    it is (an integer when it has no fractional digits, as SQLite's ``sum`` gives one),
-    and a timestamp, date, interval, uuid, range or address is written as its text.
-    JSON's writer took none of them and the command ended in a TypeError.
+    """``value`` (a cell of ``kb.sql``) as ``--json`` and ``--nl`` write it: the service's
+    encoding of SQL rows (:func:`~slr_sql.service.encoding.encode_plain`, what ``POST /sql``
+    answers and a client of the service decodes back). SQLite's cells are numbers, text,
+    blobs and NULL; PostgreSQL's come as psycopg reads its types. A blob is
+    ``{"$bytes": hex}``, a non-finite float ``{"$float": "inf" | "-inf" | "nan"}`` (also
+    inside an array), a NUMERIC (``sum`` or ``avg`` of an integer column) the number it is
+    (an integer when it has no fractional digits, as SQLite's ``sum`` gives one), a boolean,
+    an array and a json value the JSON they are, and a timestamp, date, interval, uuid,
+    range or address its text.
 
     >>> from decimal import Decimal; import datetime
     >>> json_cell(Decimal("190")), json_cell(Decimal("10.50")), json_cell([Decimal("1")])
     (190, 10.5, [1])
-    >>> json_cell(datetime.date(2026, 11, 29)), json_cell(b"\\x00"), json_cell({"a": 1})
-    ('2026-11-29', b'\\x00', {'a': 1})
+    >>> json_cell(datetime.date(2026, 11, 29)), json_cell(b"\\x00\\xff"), json_cell({"a": 1})
+    ('2026-11-29', {'$bytes': '00ff'}, {'a': 1})
+    >>> json_cell([float("inf"), None])
+    [{'$float': 'inf'}, None]
     """
-    from decimal import Decimal
+    from .service.encoding import encode_plain
 
-    if value is None or isinstance(value, (bool, int, float, str, bytes)):
-        return value
-    if isinstance(value, Decimal):
-        if value.is_finite() and value.as_tuple().exponent >= 0:   # type: ignore[operator]
-            return int(value)
-        return float(value)     # (NaN and the infinities as the floats, {"$float": ...})
-    if isinstance(value, (list, tuple)):
-        return [json_cell(v) for v in value]
-    if isinstance(value, dict):   # (json and jsonb columns)
-        return {str(k): json_cell(v) for k, v in value.items()}
-    if isinstance(value, (bytearray, memoryview)):
-        return bytes(value)
+    return encode_plain(value)
+
+
+def text_cell(value: Any) -> str | None:
+    """``value`` (a cell of ``kb.sql``) as ``--csv``, ``--tsv`` and the table write it:
+    text a CSV reader takes, never Python's notation. A boolean is ``true`` or ``false``
+    (PostgreSQL's text of it; SQLite has none: its 1 and 0 stay numbers), a blob ``\\x``
+    and its bytes in hex (PostgreSQL's text of a bytea, the digits ``--json`` writes as
+    ``{"$bytes": hex}``), an array or a json value its JSON as ``--json`` writes it, a float
+    as Python writes it (``inf``, ``-inf``, ``nan``) and NULL None (an empty field).
+
+    >>> text_cell(True), text_cell(b"\\x00\\xff"), text_cell({"a": [1, "x"]}), text_cell(2.5)
+    ('true', '\\\\x00ff', '{"a": [1, "x"]}', '2.5')
+    >>> text_cell([1.5, float("inf"), None]), text_cell(None)
+    ('[1.5, {"$float": "inf"}, null]', None)
+    """
+    if value is None:
+        return None
+    if type(value) is bool:
+        return "true" if value else "false"
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        return "\\x" + bytes(value).hex()
+    if isinstance(value, (list, tuple, dict)):
+        # (", " and ": " between items, as PostgreSQL writes a jsonb value)
+        return json.dumps(json_cell(value), ensure_ascii=False)
     return str(value)
 
 
@@ -1160,15 +1177,20 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     JSON array of row objects (one row a line), ``nl`` one JSON object a line, ``csv`` and
     ``tsv`` with a header line, ``table`` a box table for reading.
 
-    JSON has no infinity nor NaN: ``json`` and ``nl`` write such a float as the service's
-    encoding does (``{"$float": "inf"}``, ``"-inf"``, ``"nan"``; what ``slr query --json`` and
-    ``POST /sql`` write), never the ``Infinity`` a JSON reader refuses.
+    ``json`` and ``nl`` write each cell as :func:`json_cell` says: JSON has no infinity nor
+    NaN, so such a float is written as the service's encoding does (``{"$float": "inf"}``,
+    ``"-inf"``, ``"nan"``; what ``slr query --json`` and ``POST /sql`` write), never the
+    ``Infinity`` a JSON reader refuses, and a blob is ``{"$bytes": hex}``. ``csv``, ``tsv``
+    and the table write each cell's :func:`text_cell` (docs/printed_text.md).
 
     >>> write_rows(["n", "name"], [(1, "cup1"), (2, None)], "nl")
     {"n": 1, "name": "cup1"}
     {"n": 2, "name": null}
     >>> write_rows(["x"], [(float("-inf"),)], "json")
     [{"x": {"$float": "-inf"}}]
+    >>> write_rows(["b", "ok"], [(b"\\x01", True)], "csv")
+    b,ok
+    \\x01,true
     """
     import csv
 
@@ -1176,14 +1198,14 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     if fmt in ("json", "nl"):
         from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
 
-        cells = ([json_float(json_cell(v)) for v in row] for row in rows)
+        cells = ([json_cell(v) for v in row] for row in rows)
         for line in output_rows(cells, columns, nl=fmt == "nl", arrays=False, json_cols=False):
             out.write(line + "\n")
     elif fmt in ("csv", "tsv"):
         writer = csv.writer(out, dialect="excel-tab" if fmt == "tsv" else "excel",
                             lineterminator="\n")
         writer.writerow(columns)
-        writer.writerows(rows)
+        writer.writerows([text_cell(v) for v in row] for row in rows)
     else:
         from rich.console import Console
         from rich.table import Table
@@ -1192,7 +1214,7 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
         # keep the values exact, each format escaping what its own rules say)
         table = Table(*map(printable_text, columns), show_lines=False)
         for row in rows:
-            table.add_row(*("NULL" if v is None else printable_text(v) for v in row))
+            table.add_row(*("NULL" if v is None else printable_text(text_cell(v)) for v in row))
         # Into a pipe the table is not cut to the terminal's width.
         Console(file=out, highlight=False, markup=False,
                 width=None if out.isatty() else 500).print(table)

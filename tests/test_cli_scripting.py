@@ -250,3 +250,37 @@ def test_sql_json_and_nl_write_infinities_and_nan_as_json(backend):
     answers = [strict_json(line)["X"] for line in
                slr("query", backend, "v(X)^T", "--json").stdout.splitlines()]
     assert answers == [{"$float": "inf"}, {"$float": "-inf"}, 1.5]
+
+
+# -- cells that are no plain number or text: csv/tsv/table text, JSON as the service's ------
+
+def test_sql_writes_blobs_and_postgresql_booleans_json_and_arrays_as_text_a_reader_takes(backend):
+    """CSV, TSV and the table printed Python's notation (``b'\\x00\\xff'``, ``True``,
+    ``{'a': 1}``, ``[1, 2]``); --json wrote a blob as sqlite-utils' ``{"$base64": ...}``
+    where the service writes ``{"$bytes": hex}``."""
+    from slr_sql.service.encoding import decode_plain, encode_plain
+
+    assert slr("add", backend, "seen(a)^1").returncode == 0
+    if backend.startswith("postgresql"):
+        select = ("SELECT '\\x00ff'::bytea AS b, true AS t, false AS f, "
+                  "'{\"a\": [1, \"x,y\"]}'::jsonb AS j, ARRAY[1, 2] AS arr, "
+                  "ARRAY['Infinity'::float8, NULL] AS xs, ARRAY['\\x01'::bytea] AS bs")
+        texts = ["\\x00ff", "true", "false", '{"a": [1, "x,y"]}', "[1, 2]",
+                 '[{"$float": "inf"}, null]', '[{"$bytes": "01"}]']
+        values = [b"\x00\xff", True, False, {"a": [1, "x,y"]}, [1, 2], [float("inf"), None],
+                  [b"\x01"]]
+    else:
+        select = "SELECT x'00ff' AS b, 1 = 1 AS t, 1 = 0 AS f, CAST(x'' AS BLOB) AS e"
+        texts = ["\\x00ff", "1", "0", "\\x"]   # (SQLite's comparisons are the integers 1, 0)
+        values = [b"\x00\xff", 1, 0, b""]
+    for option, dialect in [("--csv", "excel"), ("--tsv", "excel-tab")]:
+        r = slr("sql", backend, select, option)
+        assert r.returncode == 0, r.stderr
+        header, row = list(csv.reader(io.StringIO(r.stdout), dialect=dialect))
+        assert row == texts, option
+    table = slr("sql", backend, select, "--table").stdout
+    assert all(f" {text} " in table for text in texts)
+    assert "b'" not in table and "True" not in table
+    row = json.loads(slr("sql", backend, select, "--json").stdout)[0]
+    assert row["b"] == {"$bytes": "00ff"} and list(row.values()) == encode_plain(values)
+    assert decode_plain(list(row.values())) == values

@@ -48,6 +48,7 @@ from .functions import SqlFunctions
 from .schema import migrate, migrate_new_memory_store, migration_scripts
 from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
 from .sqltext import file_identity as _file_identity, file_uri as _file_uri
+from .stored_text import read_text
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout", "is_postgres_url"]
@@ -1760,8 +1761,9 @@ def run_commit_callbacks(callbacks: CommitCallbacks) -> None:
 
 
 def harden(conn: sqlite3.Connection) -> SqlGuard:
-    """:func:`~slr_sql.store.authorizer.harden_connection` and the wrapped built-ins of
-    :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets.
+    """:func:`~slr_sql.store.authorizer.harden_connection`, the wrapped built-ins of
+    :mod:`~slr_sql.store.bounded_builtins` and :data:`~slr_sql.store.stored_text.read_text`:
+    what every connection of the store gets.
 
     >>> conn = sqlite3.connect(":memory:"); guard = harden(conn)
     >>> conn.execute("SELECT printf('%.*c', 2000000000, 'x')").fetchall()  # at once, not in 9 s
@@ -1773,6 +1775,9 @@ def harden(conn: sqlite3.Connection) -> SqlGuard:
     """
     guard = harden_connection(conn)
     register_functions(conn, bounded_builtins(conn, guard))
+    # a text another program wrote that is no UTF-8 is read with U+FFFD and a warning, not
+    # an error that makes every read of its table fail
+    conn.text_factory = read_text
     return guard
 
 
