@@ -66,6 +66,7 @@ class Dialect(Protocol):
     def key(self, expr: str) -> str: ...
     def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]: ...
     def key_equal(self, expr: str, value: str, short: str | None = None) -> str: ...
+    def values_equal(self, lefts: list[str], rights: list[str]) -> str | None: ...
 
     def statement(self, sql: str) -> str: ...
     def typeof(self, expr: str) -> str: ...
@@ -149,6 +150,17 @@ class SQLiteDialect(SQLiteQueryPrinter):
         '(CAST(:s AS text) IS NOT NULL AND arg1 = :v AND char_length(arg1) < 64 OR CAST(:s AS text) IS NULL AND slr_key(arg1) = slr_key(:v) AND :v = arg1)'
         """
         return f"{expr} = {value}"
+
+    def values_equal(self, lefts: list[str], rights: list[str]) -> str | None:
+        """One condition that every stored value of ``lefts`` is the same term as the one
+        of ``rights`` at its place, or None: here each pair needs an equality of its own
+        beside the SQL types' (``=`` takes 1 for 1.0), and SQLite's planner takes hundreds
+        of them in its stride.
+
+        >>> SQLITE.values_equal(["e0.arg2"], ["e1.arg2"]) is None
+        True
+        """
+        return None
 
     def scalar(self, name: str) -> str:
         """The two-argument ``max``/``min`` of values (not the aggregates)."""
@@ -273,6 +285,24 @@ class PostgresDialect(PostgresQueryPrinter):
             return far
         short = f"CAST({short} AS text)"
         return f"({short} IS NOT NULL AND {near} OR {short} IS NULL AND {far})"
+
+    def values_equal(self, lefts: list[str], rights: list[str]) -> str | None:
+        """Every stored value of ``lefts`` the same term as the one of ``rights`` at its
+        place (the texts are equal exactly when the terms are: the SQL type is spelled in
+        the text), as one condition of the planner's: the row comparison is the equalities
+        joined by AND, under an IS TRUE that keeps the planner from taking it apart.
+
+        One equality per argument made each its own equivalence class, and planning grew
+        as the cube of their number: a rule over two events of 101 shared arguments took
+        0.13 s to plan each statement, of 401 arguments 12 s (its run, milliseconds);
+        folded, 1 ms and 9 ms for 1,501. (A comparison of two arrays, exact too since no
+        value column holds NULL, planned 5 times slower at 1,501 arguments.) The
+        equalities an index serves stay apart (:meth:`AltSQL._folded`).
+
+        >>> POSTGRES.values_equal(["e0.arg2", "e0.arg3"], ["e1.arg2", "e1.arg3"])
+        '(ROW(e0.arg2, e0.arg3) = ROW(e1.arg2, e1.arg3)) IS TRUE'
+        """
+        return f"(ROW({', '.join(lefts)}) = ROW({', '.join(rights)})) IS TRUE"
 
     def scalar(self, name: str) -> str:
         return {"max": "GREATEST", "min": "LEAST"}.get(name, name)
