@@ -26,6 +26,15 @@ from store_conditions import file_condition, slr_failure
 DEADLINE = 30.0
 
 
+def _drop_table_behind_the_store(path: str, table: str) -> None:
+    """Drop ``table`` of the store file at ``path`` as another process would."""
+    raw = sqlite3.connect(path, isolation_level=None)
+    try:
+        raw.execute(f'DROP TABLE "{table}"')
+    finally:
+        raw.close()
+
+
 def _store_with_journal(path: str) -> EventStore:
     store = EventStore(path)
     store.add_event("p", ("a",), 1, 1)
@@ -41,11 +50,7 @@ def test_a_journal_dropped_by_another_connection_is_an_slr_error(tmp_path):
     try:
         # read once: the reader holds the statement prepared when the table goes
         assert reads.journal_rows("slr_subj_p", 1, 0, 10) == [(1, 2, "b", 2.0, 2.0)]
-        raw = sqlite3.connect(path, isolation_level=None)
-        try:
-            raw.execute("DROP TABLE slr_subj_p")
-        finally:
-            raw.close()
+        _drop_table_behind_the_store(path, "slr_subj_p")
         exc = slr_failure(lambda: reads.journal_rows("slr_subj_p", 1, 0, 10))
         assert type(exc) is SLRError
         assert str(exc) == f"{path}: the store failed (no such table: slr_subj_p)"
@@ -191,11 +196,7 @@ def test_a_reader_opened_after_the_store_file_was_replaced_is_store_gone(tmp_pat
 def test_the_hub_logs_a_read_of_a_dropped_journal_as_one_line(tmp_path, caplog):
     path = str(tmp_path / "s.db")
     with hub_with_one_delivery(path, caplog) as (kb, hub, sub):
-        raw = sqlite3.connect(path, isolation_level=None)
-        try:
-            raw.execute("DROP TABLE slr_subj_p")
-        finally:
-            raw.close()
+        _drop_table_behind_the_store(path, "slr_subj_p")
         assert hub.drain(DEADLINE)
         records = [r for r in caplog.records if "delivery pass failed" in r.getMessage()]
         assert len(records) == 1, caplog.text
@@ -215,11 +216,7 @@ def test_a_trim_of_a_journal_another_connection_dropped_is_an_slr_error(tmp_path
     journal is (one WARNING line)."""
     path = str(tmp_path / "s.db")
     with hub_with_one_delivery(path, caplog) as (kb, hub, sub):
-        raw = sqlite3.connect(path, isolation_level=None)
-        try:
-            raw.execute("DROP TABLE slr_subj_p")
-        finally:
-            raw.close()
+        _drop_table_behind_the_store(path, "slr_subj_p")
         with pytest.raises(SLRError, match="no such table: slr_subj_p"):
             kb.store.trim_journal("slr_subj_p", 1)
         assert kb.store.subscription_rows()   # (the registry reads on)
@@ -252,11 +249,7 @@ def test_a_pass_reading_through_the_stores_connection_logs_a_dropped_journal_as_
     path = str(tmp_path / "s.db")
     with hub_with_one_delivery(path, caplog) as (kb, hub, sub):
         assert hub.drain(DEADLINE)
-        raw = sqlite3.connect(path, isolation_level=None)
-        try:
-            raw.execute("DROP TABLE slr_subj_p")
-        finally:
-            raw.close()
+        _drop_table_behind_the_store(path, "slr_subj_p")
         hub.notify(through_store=True)    # the next pass reads through the store's connection
         assert hub.drain(DEADLINE)
         assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
@@ -272,11 +265,7 @@ def test_a_journal_read_through_the_stores_connection_is_an_slr_error(tmp_path):
     store = _store_with_journal(path)
     try:
         reads = store.journal_reader(own_connection=False)
-        raw = sqlite3.connect(path, isolation_level=None)
-        try:
-            raw.execute("DROP TABLE slr_subj_p")
-        finally:
-            raw.close()
+        _drop_table_behind_the_store(path, "slr_subj_p")
         exc = slr_failure(lambda: reads.max_jid("slr_subj_p"))
         assert str(exc) == f"{path}: the store failed (no such table: slr_subj_p)"
         for suffix in ("", "-wal", "-shm"):
