@@ -180,18 +180,25 @@ def test_query_options_out_of_range_are_errors_in_words(stored_db, options):
     fails_in_words(slr("query", stored_db, "p(X)^T", *options), "error: ")
 
 
+def _infinity_spelled_three_ways_answers_as_without(stored_db, option: str):
+    """``slr query p(X)^T`` with ``option`` given +∞ as ``inf``, ``1e400`` and an integer
+    beyond a float answers as without it; returns the run without it."""
+    plain = slr("query", stored_db, "p(X)^T")
+    assert plain.returncode == 0 and plain.stdout == "X = 4, T = 1.0\nX = 6, T = 2.0\n", \
+        plain.stderr
+    for spelled in ("inf", "1e400", "1" + "0" * 400):
+        r = slr("query", stored_db, "p(X)^T", option, spelled)
+        assert (r.returncode, r.stdout) == (0, plain.stdout), (spelled, r.stderr)
+    return plain
+
+
 def test_timeout_inf_is_no_limit_as_in_the_library(stored_db, tmp_path):
     """`slr query --timeout inf` was refused ("--timeout must be a finite number") while
     `kb.query(timeout=inf)` takes it (SPEC: inf is +∞ where a number is expected): no limit,
     spelled inf, 1e400 or an integer beyond a float, with and without --wait; `slr plot
     --timeout` the same (and `kb.plot(timeout=inf)`, refused by the library too). NaN and
     negative timeouts are refused in the library's words."""
-    plain = slr("query", stored_db, "p(X)^T")
-    assert plain.returncode == 0 and plain.stdout == "X = 4, T = 1.0\nX = 6, T = 2.0\n", \
-        plain.stderr
-    for spelled in ("inf", "1e400", "1" + "0" * 400):
-        r = slr("query", stored_db, "p(X)^T", "--timeout", spelled)
-        assert (r.returncode, r.stdout) == (0, plain.stdout), (spelled, r.stderr)
+    plain = _infinity_spelled_three_ways_answers_as_without(stored_db, "--timeout")
     assert slr("add", stored_db, "fullyUpdated(p/1)^5").returncode == 0   # (complete up to 5)
     r = slr("query", stored_db, "p(X)^T", "--at", "5", "--wait", "--timeout", "inf")
     assert (r.returncode, r.stdout) == (0, plain.stdout), r.stderr
@@ -216,12 +223,7 @@ def test_at_inf_is_the_view_of_every_stored_event_as_in_the_library_and_the_shel
     `kb.query(at=inf)` and the shell's `at inf` take it: ⟨Q, +∞⟩ sees every stored event
     (SPEC: inf is +∞ where a number is expected). It answers as without --at, 1e400 (a
     float's inf) and -inf (no event) too; NaN is refused in the library's words."""
-    plain = slr("query", stored_db, "p(X)^T")
-    assert plain.returncode == 0 and plain.stdout == "X = 4, T = 1.0\nX = 6, T = 2.0\n", \
-        plain.stderr
-    for spelled in ("inf", "1e400", "1" + "0" * 400):
-        r = slr("query", stored_db, "p(X)^T", "--at", spelled)
-        assert (r.returncode, r.stdout) == (0, plain.stdout), (spelled, r.stderr)
+    _infinity_spelled_three_ways_answers_as_without(stored_db, "--at")
     r = slr("query", stored_db, "p(X)^T", "--at=-inf")
     assert (r.returncode, r.stdout) == (0, "false.\n"), r.stderr
     with slr_sql.open(stored_db) as kb:
