@@ -881,11 +881,10 @@ def click_group() -> Any:
             refuse_no_store(fleet)
         rows = status(fleet, token=token_of(ctx))
         if as_json:
-            from .printable import json_float
+            from .service.encoding import encode_plain
             # (a time that is not finite, from a fleet file edited by hand or a server of
             # another make, as the rest of the command line writes one: JSON has no Infinity)
-            click.echo(json.dumps([{k: json_float(v) for k, v in r.items()} for r in rows],
-                                  indent=2, allow_nan=False))
+            click.echo(json.dumps(encode_plain(rows), indent=2, allow_nan=False))
             return
         if not rows:
             click.echo("no robot has shipped to this store")

@@ -34,7 +34,7 @@ from typing import Any
 from .errors import SLRSyntaxError
 from .terms import char_escape, quoted_text, undrawn_character
 
-__all__ = ["json_float", "printable_name", "printable_text", "printable_syntax_error", "log_text",
+__all__ = ["printable_name", "printable_text", "printable_syntax_error", "log_text",
            "LOG_TEXT_LIMIT", "shorten", "shown"]
 
 LOG_TEXT_LIMIT = 200   # characters of stranger-supplied text in one log line
@@ -136,16 +136,3 @@ def shown(value: Any, limit: int = 80) -> str:
         return f"a {type(value).__name__} holding an integer too long to print"
     except Exception:  # noqa: BLE001 - a value whose repr fails says only its type
         return f"a {type(value).__name__}"
-
-
-def json_float(value: Any) -> Any:
-    """``value``, or for a float that is not finite the form the service's encoding and the
-    command line's JSON write it in (JSON has no ``Infinity`` nor ``NaN``, which a strict
-    reader refuses).
-
-    >>> json_float(1.5), json_float(float("-inf")), json_float(float("nan"))
-    (1.5, {'$float': '-inf'}, {'$float': 'nan'})
-    """
-    if type(value) is float and not math.isfinite(value):
-        return {"$float": "nan" if value != value else ("inf" if value > 0 else "-inf")}
-    return value
