@@ -757,6 +757,7 @@ class KnowledgeBase:
     def event_rules(self) -> list[dict[str, Any]]:
         """The event rules (``Head <- Pattern``) in force, in the order they run: each a
         dict with ``head`` (name/arity), ``rule`` (its text), ``pattern``, ``policy``,
+        ``program`` (the named program holding it, whose directives set its policy),
         ``source`` (file:line), ``line``, ``table`` (where its complex events are stored),
         ``provenance`` (the table recording each match's events), and counters:
         ``detections`` (this session), ``pending`` (decisions waiting for completeness),

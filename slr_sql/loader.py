@@ -127,7 +127,7 @@ class ProgramLoader:
         version = self.store.program_version()
         texts = self.store.program_texts()
         self.store.event_types()   # re-read the event types too: declared arities may be new
-        program, decls = self._build(self._parse_texts(texts))
+        program, decls = self._build(self._named(texts))
         self.program, self.declarations = program, decls
         self.host.engine.program = program
         self.version = version
@@ -158,25 +158,33 @@ class ProgramLoader:
         self._parsed = parsed
         return out
 
-    def _build(self, texts: Iterable[list[Clause]]) -> tuple[Program, Declarations]:
+    def _named(self, texts: list) -> list[tuple[str, list[Clause]]]:
+        """The clauses of each stored text with the name of its program."""
+        return list(zip((t.name for t in texts), self._parse_texts(texts)))
+
+    def _build(self, texts: Iterable[tuple[str, list[Clause]]]) -> tuple[Program, Declarations]:
         program, decls = Program(), Declarations()
-        for clauses in texts:
-            self._add_clauses(clauses, program, decls)
+        for name, clauses in texts:
+            self._add_clauses(clauses, program, decls, name)
         return program, decls
 
     # -- program building ---------------------------------------------------------------
-    def _add_clauses(self, clauses: list[Clause], program: Program, decls: Declarations) -> None:
+    def _add_clauses(self, clauses: list[Clause], program: Program, decls: Declarations,
+                     name: str) -> None:
+        """Add the clauses of one text of the program ``name``."""
         from . import cep as _cep  # event rules Head <- Pattern
         for clause in clauses:
             if clause.head is None:
-                self._directive(clause, program, decls)
+                self._directive(clause, program, decls, name)
                 continue
             head = deref(clause.head)
             if _cep.is_event_rule(head):
                 # (the size of a new rule is checked by load: a rule the store holds
                 # already, loaded by an earlier version beyond today's maximum, still
                 # loads, so that its file opens and the program can be unloaded)
-                decls.event_rules.append(_cep.compile_rule(clause, sized=False))
+                rule = _cep.compile_rule(clause, sized=False)
+                rule.program = name   # (its policy: its own program's directives)
+                decls.read_rules.append(rule)
                 continue
             if _cep.is_ignored_fact(head):
                 continue   # ETALIS-only facts such as print_trigger/1 (docs/events.md)
@@ -184,8 +192,10 @@ class ProgramLoader:
             if type(head) is Struct and head.name in ("tBuffer", "cBuffer") and len(head.args) == 2:
                 decls.buffers.append(self._buffer_decl(head, clause))
             program.add_clause(clause)
-        if decls.event_rules:  # policies, dependency order, no cycles
-            decls.event_rules = _cep.prepare(decls.event_rules, decls.consumption, program)
+        if decls.read_rules:  # policies, dependency order, no cycles
+            # (from every rule as read: a text of a program may set the policy of rules
+            # that an earlier text of it holds, and that another program holds too)
+            decls.event_rules = _cep.prepare(decls.read_rules, decls.consumption, program)
 
     def _buffer_decl(self, head: Struct, clause: Clause) -> BufferDecl:
         pattern, amount = deref(head.args[0]), deref(head.args[1])
@@ -216,7 +226,8 @@ class ProgramLoader:
         if key in CONTROL or key in BUILTIN_NAMES or key in (("prev", 2), ("next", 2), ("next", 3)):
             raise SLRError(f"{_where(clause)}cannot redefine the builtin {key[0]}/{key[1]}")
 
-    def _directive(self, clause: Clause, program: Program, decls: Declarations) -> None:
+    def _directive(self, clause: Clause, program: Program, decls: Declarations,
+                   program_name: str) -> None:
         goal = deref(clause.body)
         name = str(goal.name) if type(goal) is Struct else str(goal)
         args = goal.args if type(goal) is Struct else ()
@@ -241,7 +252,9 @@ class ProgramLoader:
             elif name == "consumption" and len(args) in (1, 2):
                 from .cep import consumption_directive
                 target, policy = consumption_directive(goal)
-                decls.consumption[target] = policy
+                # (its own program's rules only: a program loaded later must not change
+                # how the rules of the programs loaded before pair events)
+                decls.consumption.setdefault(program_name, {})[target] = policy
             else:
                 raise SLRError(f"unknown directive :- {format_term(goal)}")
         except SLRError as exc:
@@ -265,19 +278,20 @@ class ProgramLoader:
             stale = self.store.program_version() != self.version
             if replace or stale:
                 texts = [t for t in self.store.program_texts() if not (replace and t.name == name)]
-                parsed = self._parse_texts(texts)
+                parsed = self._named(texts)
                 if replace:
                     first = self._first_text_of(name)
                     at = len([t for t in texts if first is not None and t.id < first])
-                    parsed = parsed[:at] + [clauses] + parsed[at:] if first is not None \
-                        else parsed + [clauses]
+                    parsed = parsed[:at] + [(name, clauses)] + parsed[at:] if first is not None \
+                        else parsed + [(name, clauses)]
                 else:
-                    parsed = parsed + [clauses]
+                    parsed = parsed + [(name, clauses)]
                 program, decls = self._build(parsed)
             else:
                 program, decls = self.program.copy(), self.declarations.copy()
-                self._add_clauses(clauses, program, decls)
+                self._add_clauses(clauses, program, decls, name)
             self._check_event_arities(decls, filename)
+            self._check_consumption_heads(decls, name, filename)
             self._install(program, decls, lambda: self.store.replace_named_program(
                 name, text, filename) if replace else self.store.append_program(
                 text, filename, name), (text, clauses))
@@ -292,12 +306,38 @@ class ProgramLoader:
                 names = list(dict.fromkeys(t.name for t in stored))
                 raise SLRError(f"no program named {shown(name)} (loaded: "
                                f"{', '.join(repr(n) for n in names) or 'none'})")
-            program, decls = self._build(self._parse_texts(texts))
+            program, decls = self._build(self._named(texts))
             self._install(program, decls, lambda: self.store.delete_program(name))
 
     def _first_text_of(self, name: str) -> int | None:
         ids = [t.id for t in self.store.program_texts() if t.name == name]
         return min(ids) if ids else None
+
+    @staticmethod
+    def _check_consumption_heads(decls: Declarations, name: str, filename: str) -> None:
+        """Refuse ``:- consumption(Head/N, Policy)`` in the program ``name`` when Head/N is
+        the head of event rules of other programs and of none of its own: a directive
+        governs its own program's rules, so it would change nothing while its writer
+        meant to change how those other rules pair events (which a program must not do
+        to another). A head no program defines yet is accepted: the directive waits for
+        rules of its own program (a shell's ``user`` program gets them text by text)."""
+        own = {rule.head_key for rule in decls.read_rules if rule.program == name}
+        for head, policy in sorted(((h, p) for h, p in decls.consumption.get(name, {}).items()
+                                    if h is not None), key=repr):
+            if head in own:
+                continue
+            others = sorted({rule.program for rule in decls.read_rules
+                             if rule.head_key == head and rule.program != name})
+            if others:
+                ind = f"{format_term(Atom(head[0]))}/{head[1]}"
+                raise SLRError(
+                    f"{filename}: :- consumption({ind}, {policy}): the event rules of {ind} "
+                    f"are in the program{'s' if len(others) > 1 else ''} "
+                    f"{', '.join(shown(o) for o in others)}, none in the program "
+                    f"{shown(name)} loaded here; a consumption directive sets the policy of "
+                    f"its own program's rules only, so that loading a program never changes "
+                    f"how another program's rules pair events (put the directive in "
+                    f"the text of {shown(others[0])})")
 
     def _check_event_arities(self, decls: Declarations, filename: str) -> None:
         """Refuse ``:- event p/N`` when the store already has events of p with another

@@ -395,9 +395,15 @@ class Declarations:
     in_order: set = field(default_factory=set)            # {(name, arity)}
     buffers: list = field(default_factory=list)           # [BufferDecl]
     event_rules: list = field(default_factory=list)       # [cep.EventRule], dependency order
-    consumption: dict = field(default_factory=dict)       # (name, arity) | None -> policy
+    # program name -> {(name, arity) | None: policy}: a program's consumption directives,
+    # which govern its own event rules only
+    consumption: dict = field(default_factory=dict)
+    # [cep.EventRule] as read, every program's in load order (event_rules is made from
+    # them: policies resolved, the same rule under the same policy kept once)
+    read_rules: list = field(default_factory=list)
 
     def copy(self) -> "Declarations":
         return Declarations(set(self.event_types), dict(self.max_delay), set(self.in_order),
                             list(self.buffers), list(self.event_rules),
-                            dict(self.consumption))
+                            {name: dict(policies) for name, policies in self.consumption.items()},
+                            list(self.read_rules))

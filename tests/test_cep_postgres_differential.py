@@ -13,6 +13,8 @@ its own database:
 * any arrival order == in-order arrival;
 * one add_many == the same events added one by one, with a count buffer pruning a type
   the rule reads;
+* two rules in two named programs, each with its own consumption policy == the reference
+  under each rule's own policy;
 * several writers: the stream's events shared out between two knowledge bases on one store
   (each its own connection, as two processes have), their adds interleaved, detect what the
   reference detects -- each match once -- on SQLite files and on PostgreSQL.
@@ -24,7 +26,7 @@ import os
 
 import pytest
 import test_cep_differential as cepdiff
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import slr_sql
 from slr_sql import ManualClock
@@ -86,6 +88,13 @@ def test_a_batch_on_postgres_derives_what_its_events_derive_one_by_one_with_buff
     batch = cepdiff.run(rule, events, order, [len(events)], False, False, buffer,
                         where=_schema(database))
     assert cepdiff._typed(one) == cepdiff._typed(batch), cepdiff.rule_text(rule) + buffer
+
+
+@settings(max_examples=10 * FACTOR, **SETTINGS)
+@given(cepdiff.program_cases())
+@example(cepdiff.TWO_POLICIES)
+def test_two_programs_on_postgres_each_pair_events_by_their_own_policy(database, case):
+    cepdiff.programs_equal_the_reference(case, where=_schema(database))
 
 
 # ------------------------------------------------------------------ several writers

@@ -38,16 +38,20 @@ __all__ = ["attach", "prepare", "check_size", "compile_rule", "consumption_direc
 
 
 def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[EventRule]:
-    """The rules of a program with their policies resolved (``consumption`` maps a head
-    name/arity, or None for the default, to a policy), in dependency order; raises an
-    SLRError for cyclic definitions. The rules given are not changed (a failed load must
-    leave the loaded program as it was).
+    """The rules of a program with their policies resolved, in dependency order; raises an
+    SLRError for cyclic definitions. ``consumption`` maps a named program to its directives
+    (a head name/arity, or None for the program's default, to a policy); each rule takes
+    its own program's (:func:`~slr_sql.cep.rules.order_rules`). The rules given are not
+    changed (a failed load must leave the loaded program as it was).
 
     >>> from slr_sql.parser import parse_program
     >>> from slr_sql.program import Program
     >>> rs = [compile_rule(c) for c in parse_program("c(X) <- a(X) seq b(X).")]
-    >>> [r.policy for r in prepare(rs, {None: "recent"}, Program())]
+    >>> rs[0].program = "main"
+    >>> [r.policy for r in prepare(rs, {"main": {None: "recent"}}, Program())]
     ['recent']
+    >>> [r.policy for r in prepare(rs, {"other": {None: "recent"}}, Program())]
+    ['unrestricted']
     """
     from ..analysis import goal_set
 
@@ -65,8 +69,7 @@ def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[Eve
             if not gs.unknown:
                 types |= set(gs)
         reads[id(rule)] = types
-    policies = {k: v for k, v in consumption.items() if k is not None}
-    ordered = order_rules(copies, policies, consumption.get(None), reads)
+    ordered = order_rules(copies, consumption, reads)
     # the same rule (same text up to variable names, same policy) loaded twice is one rule
     seen: set = set()
     unique = []

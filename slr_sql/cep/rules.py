@@ -147,7 +147,8 @@ class Alternative:
 @dataclass
 class EventRule:
     """A compiled event rule; ``policy`` is filled in by :func:`order_rules` (a directive
-    may come after the rule)."""
+    may come after the rule) from the consumption directives of ``program``, the named
+    program whose text holds the rule (a directive governs its own program's rules only)."""
 
     clause: Clause
     head: Any
@@ -158,6 +159,7 @@ class EventRule:
     text: str
     key: str = ""
     policy: str = "unrestricted"
+    program: str = ""
 
     @property
     def head_key(self) -> tuple[str, int]:
@@ -769,21 +771,27 @@ def _has_or(p: Any) -> bool:
     return False
 
 
-def order_rules(rules: list[EventRule], policies: dict, default: str | None,
+def order_rules(rules: list[EventRule], consumption: dict | None = None,
                 reads: dict | None = None) -> list[EventRule]:
-    """Fill in each rule's policy (``policies[(name, n)]``, else ``default``, else
-    unrestricted) and its key, and return the rules in dependency order: a rule comes after
-    every rule whose complex events it reads (its event atoms, negated ones, and the event
-    types ``reads[id(rule)]`` its where goal reads). Cyclic definitions are an SLRError
-    naming the rules and lines.
+    """Fill in each rule's policy and its key, and return the rules in dependency order.
+
+    The policy is the one its own program sets (``consumption[rule.program]``, which maps
+    the head ``(name, n)`` or None, the program's default, to a policy): the head's, else
+    the program's default, else unrestricted -- another program's directives never apply.
+    A rule comes after every rule whose complex events it reads (its event atoms, negated
+    ones, and the event types ``reads[id(rule)]`` its where goal reads). Cyclic definitions
+    are an SLRError naming the rules and lines.
 
     >>> from slr_sql.parser import parse_program
     >>> rs = [compile_rule(c) for c in parse_program("b(X) <- a(X). c(X) <- b(X) seq a(X).")]
-    >>> [r.name for r in order_rules(list(reversed(rs)), {}, None)]
-    ['b', 'c']
+    >>> rs[1].program = "other"
+    >>> ordered = order_rules(list(reversed(rs)), {"other": {None: "recent"}})
+    >>> [(r.name, r.policy) for r in ordered]
+    [('b', 'unrestricted'), ('c', 'recent')]
     """
     for rule in rules:
-        rule.policy = policies.get(rule.head_key) or default or "unrestricted"
+        own = (consumption or {}).get(rule.program) or {}
+        rule.policy = own.get(rule.head_key) or own.get(None) or "unrestricted"
         # the pattern as read (ETALIS's synonyms lowercased): 'SEQ' and seq are one rule
         rule.key = hashlib.sha1((_canonical(Struct("<-", (rule.head, rule.pattern)))
                                  + "|" + rule.policy)

@@ -1562,7 +1562,8 @@ class EventRules:
             rule = rt.rule
             out.append({"head": _type(rt.head_key), "rule": rule.text,
                         "pattern": format_term(rule.pattern, priority=1199),
-                        "policy": rt.policy, "source": rule.source, "line": rule.line,
+                        "policy": rt.policy, "program": rule.program,
+                        "source": rule.source, "line": rule.line,
                         "key": rt.key, "table": self.store.table_for(*rt.head_key),
                         "provenance": rt.prov_name, "detections": rt.detections,
                         "pending": rt.pending, "errors": rt.errors,
@@ -1680,11 +1681,15 @@ class EventRules:
         if is_event_rule(term):
             clause = parse_program(goal.rstrip().rstrip(".") + " .", "<explain>")[0]
             rule = compile_rule(clause)
-            order_rules([rule], self.kb.declarations.consumption,
-                        self.kb.declarations.consumption.get(None))
-            for rt in self.rules:
-                if rt.key == rule.key:
-                    return True, self.explain_rule(rt)
+            consumption = self.kb.declarations.consumption
+            # the loaded rule of this text under the policy of the program holding it; if
+            # none, the rule as kb.load would add it to its default program, main
+            for program in sorted({rt.rule.program for rt in self.rules}) + ["main"]:
+                rule.program = program
+                order_rules([rule], consumption)
+                for rt in self.rules:
+                    if rt.key == rule.key:
+                        return True, self.explain_rule(rt)
             rt = RuleRuntime(self, rule)
             return True, ["(not loaded: how it would run)"] + self.explain_rule(rt)
         t = deref(term)

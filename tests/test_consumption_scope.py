@@ -1,0 +1,105 @@
+"""A consumption directive governs the event rules of its own program (docs/events.md,
+"Consumption policies"): ``:- consumption(Policy).`` in one named program never changes how
+another program's rules pair events, whichever was loaded first, across unload, replace and
+reopening the store; ``:- consumption(Head/N, Policy).`` naming a head that only other
+programs define is refused, changing nothing. On a SQLite file and on PostgreSQL.
+"""
+from __future__ import annotations
+
+import pytest
+
+import slr_sql
+from slr_sql import ManualClock
+
+DELAYS = ":- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n"
+# two programs over the same events: 'pairs' has no directive (unrestricted), 'latest'
+# pairs each b with the most recent a
+PAIRS = DELAYS + "c(X) <- a(X) seq b(X).\n"
+LATEST = ":- consumption(recent).\nd(X) <- a(X) seq b(X).\n"
+
+
+def _intervals(kb, head: str) -> list[tuple[float, float]]:
+    return sorted((a["S"], a["E"]) for a in kb.query(f"{head}(_)^[S, E]"))
+
+
+def _policies(kb) -> dict[tuple[str, str], str]:
+    return {(r["program"], r["head"]): r["policy"] for r in kb.event_rules()}
+
+
+@pytest.mark.parametrize("latest_first", [False, True], ids=["pairs-first", "latest-first"])
+def test_a_programs_default_policy_leaves_the_other_programs_rules_alone(backend, latest_first):
+    clock = ManualClock(0.0)
+    loads = [("pairs", PAIRS), ("latest", LATEST)]
+    with slr_sql.open(backend, clock=clock) as kb:
+        for name, text in (reversed(loads) if latest_first else loads):
+            kb.load(text, name=name)
+        assert _policies(kb) == {("pairs", "c/1"): "unrestricted",
+                                 ("latest", "d/1"): "recent"}
+        kb.add_many(["a(1)^1", "a(1)^2", "b(1)^3"])
+        clock.set(10.0)
+        assert _intervals(kb, "c") == [(1.0, 3.0), (2.0, 3.0)]
+        assert _intervals(kb, "d") == [(2.0, 3.0)]
+        assert "consumption policy unrestricted" in kb.explain("c(X) <- a(X) seq b(X)")
+    # reopened: the rules are built again from the stored texts, each with its policy
+    clock = ManualClock(10.0)
+    with slr_sql.open(backend, clock=clock) as kb:
+        assert _policies(kb) == {("pairs", "c/1"): "unrestricted",
+                                 ("latest", "d/1"): "recent"}
+        kb.add_many(["a(1)^11", "b(1)^12"])
+        clock.set(20.0)
+        assert _intervals(kb, "c") == [(1.0, 3.0), (1.0, 12.0), (2.0, 3.0), (2.0, 12.0),
+                                       (11.0, 12.0)]
+        assert _intervals(kb, "d") == [(2.0, 3.0), (11.0, 12.0)]
+
+
+def test_replacing_and_unloading_a_program_keep_the_others_policies(backend):
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as kb:
+        kb.load(PAIRS, name="pairs")
+        kb.load(LATEST, name="latest")
+        kb.load(":- consumption(chronological).\nd(X) <- a(X) seq b(X).\n", name="latest",
+                replace=True)
+        assert _policies(kb) == {("pairs", "c/1"): "unrestricted",
+                                 ("latest", "d/1"): "chronological"}
+        kb.unload("pairs")
+        kb.load(PAIRS, name="pairs")     # loaded again, after the program with a directive
+        assert _policies(kb) == {("pairs", "c/1"): "unrestricted",
+                                 ("latest", "d/1"): "chronological"}
+        kb.unload("latest")
+        assert _policies(kb) == {("pairs", "c/1"): "unrestricted"}
+
+
+def test_a_directive_in_a_later_text_of_the_same_program_sets_its_earlier_rules(backend):
+    # texts added to one name are one program (the shell's 'user' program is made so); the
+    # same rule in another program keeps that program's policy, and is a rule of its own
+    rule = "c(X) <- a(X) seq b(X).\n"
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as kb:
+        kb.load(DELAYS + rule, name="pairs")
+        kb.load(rule, name="user")
+        kb.load(":- consumption(recent).", name="user")
+        assert sorted((r["program"], r["policy"]) for r in kb.event_rules()) == \
+            [("pairs", "unrestricted"), ("user", "recent")]
+
+
+def test_a_head_directive_for_rules_only_another_program_has_is_refused(backend):
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as kb:
+        kb.load(PAIRS, name="pairs")
+        before = (kb.programs(), _policies(kb))
+        with pytest.raises(slr_sql.SLRError, match=r"consumption\(c/1, recent\): the event "
+                                                   r"rules of c/1 are in the program 'pairs'"):
+            kb.load(":- consumption(c/1, recent).\nd(X) <- a(X) seq b(X).\n", name="other")
+        assert (kb.programs(), _policies(kb)) == before    # nothing changed
+        # a program that defines the head too sets its own rules' policy only
+        kb.load(":- consumption(c/1, recent).\nc(X) <- a(X) seq b(X) within 5.\n",
+                name="other")
+        assert {r["policy"] for r in kb.event_rules() if r["program"] == "pairs"} == \
+            {"unrestricted"}
+        assert {r["policy"] for r in kb.event_rules() if r["program"] == "other"} == \
+            {"recent"}
+        # a head no program defines yet waits for rules of its own program
+        kb.load(":- consumption(e/1, chronological).", name="later")
+        kb.load("e(X) <- a(X) seq b(X).", name="later")
+        assert _policies(kb)[("later", "e/1")] == "chronological"
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as kb:   # reopened: the same
+        assert _policies(kb)[("later", "e/1")] == "chronological"
+        assert {r["policy"] for r in kb.event_rules() if r["program"] == "pairs"} == \
+            {"unrestricted"}
