@@ -28,7 +28,7 @@ from .answers import answer_text, rebuilt, value_text
 from .encoding import decode
 from .arguments import check_time_option
 from .kb import KnowledgeBase
-from .parser import full_stop_end, parse_event_fast
+from .parser import full_stop_end, parse_event_fast, parse_indicator
 from .printable import printable_name, printable_syntax_error, printable_text
 from .arguments import refuse_memory_store
 from .store import refuse_no_store, shown_location
@@ -993,12 +993,11 @@ def describe_types(kb: KnowledgeBase, wanted: Iterable[str] = ()) -> list[TypeSu
     chosen = []
     for spec in wanted:
         # NAME/ARITY splits at the last slash, and only before digits: a type whose name
-        # holds a slash ('a/b') is chosen by a/b/1, or by its whole name a/b
-        name, slash, arity = spec.rpartition("/")
-        if not (slash and arity.isdigit()):
-            name, arity = spec, ""
-        found = [k for k in types if k[0] == name and (not arity or str(k[1]) == arity)]
-        if not found and arity:
+        # holds a slash ('a/b') is chosen by a/b/1, or by its whole name a/b; or by the
+        # name quoted as Prolog writes it ('a/b'/1, read as Prolog reads it)
+        name, arity = parse_indicator(spec)
+        found = [k for k in types if k[0] == name and arity in (None, k[1])]
+        if not found and arity is not None and not spec.startswith("'"):
             found = [k for k in types if k[0] == spec]
         if not found:
             raise slr_sql.SLRError(f"no event type {spec} in the store (known: "

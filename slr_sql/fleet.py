@@ -155,15 +155,17 @@ def open_target(fleet: str, token: str | None = None) -> FleetTarget:
 
 
 def parse_type_spec(spec: str) -> tuple[str, int]:
-    """``"seen/2"`` -> ``("seen", 2)``.
+    """``"seen/2"`` -> ``("seen", 2)``; a quoted name is read as Prolog reads it.
 
-    >>> parse_type_spec("seen/2")
-    ('seen', 2)
+    >>> parse_type_spec("seen/2"), parse_type_spec("'x/seen'/2"), parse_type_spec("x/seen/2")
+    (('seen', 2), ('x/seen', 2), ('x/seen', 2))
     """
-    name, slash, arity = spec.rpartition("/")
-    if not slash or not name or not arity.isdigit():
+    from .parser import parse_indicator
+
+    name, arity = parse_indicator(spec)   # (a malformed quoted name: its SLRError)
+    if arity is None:
         raise SLRError(f"an event type is name/arity (seen/2), not {spec!r}")
-    return name, int(arity)
+    return name, arity
 
 
 @dataclass

@@ -27,7 +27,7 @@ from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
 from .encoding import NullArgument, event_form_loop
 from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRError, SLRUnavailable
-from .parser import parse_event_fast, parse_program, parse_term
+from .parser import parse_event_fast, parse_indicator, parse_program, parse_term
 from .loader import ProgramLoader
 from .lockorder import held_here
 from .plans import PlanCache, argument_term, check_goal, instantiate
@@ -1159,7 +1159,12 @@ def check_event_type(method: str, spec: Any) -> None:
     arity)`` pair) that can be stored, with an arity an event may have; else an
     :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
 
-    >>> check_event_type("complete_until", "p/1")
+    >>> check_event_type("complete_until", "p/1"), check_event_type("mark_complete", "'x/seen'/2")
+    (None, None)
+    >>> check_event_type("mark_complete", "'x/seen/2")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: mark_complete: "'x/seen/2" is not an indicator Name/Arity or Name: it does not read as a quoted name, alone or followed by /Arity (unterminated quoted atom)
     >>> check_event_type("complete_until", 5)
     Traceback (most recent call last):
     ...
@@ -1170,6 +1175,14 @@ def check_event_type(method: str, spec: Any) -> None:
         text = spec[0]
     elif isinstance(spec, str):
         text = spec
+        if spec.startswith("'"):   # a name quoted as Prolog writes it: read as Prolog does
+            try:
+                _, quoted_arity = parse_indicator(spec)
+            except SLRError as exc:
+                raise SLRError(f"{method}: {exc}") from None
+            if quoted_arity is not None and quoted_arity > 999_999:
+                raise SLRError(f"{method}: the arity of {shown(spec)} is out of range (an "
+                               f"event has at most a few thousand arguments)")
         name, sep, arity = spec.rpartition("/")
         if sep and name and arity.isdigit() and len(arity) > 6:
             raise SLRError(f"{method}: the arity of {shown(spec)} is out of range (an event "

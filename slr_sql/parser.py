@@ -29,14 +29,14 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .grammar.slr_parser import Lark
 
-from .errors import SLRSyntaxError
+from .errors import SLRError, SLRSyntaxError
 from .lockorder import ordered_lock
 from .terms import INFIX_OPS, PREFIX_OPS
 from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
 from .terms import MAX_INTEGER_BITS, int_from_text
 
 __all__ = ["parse_program", "parse_term", "parse_first_term", "parse_event_fast", "token_spans",
-           "full_stop_end"]
+           "full_stop_end", "parse_indicator"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("grammar") / "slr.lark"
 
@@ -1012,6 +1012,57 @@ def parse_term(text: str, filename: str = "<query>") -> tuple[Any, dict[str, Var
     ('color(O,C)^12.5', ['O', 'C'])
     """
     return _parse(text, filename, "query")
+
+
+def parse_indicator(text: str) -> tuple[str, int | None]:
+    r"""An event type or predicate given as text, ``Name/Arity`` or ``Name`` (every arity):
+    ``(name, arity)``, arity None when not given.
+
+    A name that begins with a quote is read as Prolog reads a quoted atom (the form
+    ``writeq`` and slr_sql's messages print: ``'x/seen'/2``, ``'it''s'/1``, escapes such as
+    ``\n``), and the text must then be that atom or that atom ``/`` an arity; anything
+    else is an SLRError. A name written without quotes is the text before the last slash
+    that digits follow (so ``x/seen/2`` is the type ``'x/seen'`` of two arguments, as
+    before quoted names were read), else the whole text.
+
+    >>> parse_indicator("seg/2"), parse_indicator("seg"), parse_indicator("x/seen/2")
+    (('seg', 2), ('seg', None), ('x/seen', 2))
+    >>> parse_indicator("'x/seen'/2"), parse_indicator("'it''s'"), parse_indicator("'a\\nb'/0")
+    (('x/seen', 2), ("it's", None), ('a\nb', 0))
+    >>> parse_indicator("'x/seen/2")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: "'x/seen/2" is not an indicator Name/Arity or Name: it does not read as a quoted name, alone or followed by /Arity (unterminated quoted atom)
+    """
+    if not text.startswith("'"):
+        name, slash, arity = text.rpartition("/")
+        if slash and name and arity.isascii() and arity.isdigit():
+            return name, int(arity)
+        return text, None
+    from .printable import shown
+
+    def refused(why: str) -> SLRError:
+        return SLRError(f"{shown(text)} is not an indicator Name/Arity or Name: {why}")
+
+    try:
+        term, _ = _parse(text, "<indicator>", "query")
+    except SLRError as exc:
+        detail = getattr(exc, "message", None) or str(exc).splitlines()[0]
+        raise refused(f"it does not read as a quoted name, alone or followed by /Arity "
+                      f"({detail})") from None
+    if type(term) is Struct and term.name == "/" and len(term.args) == 2:
+        name, arity = term.args
+        if type(name) is not Atom:
+            raise refused("the part before the last / is not one quoted name")
+        if type(arity) is not int or arity < 0:
+            raise refused("the arity must be an integer >= 0")
+    elif type(term) is Atom:
+        name, arity = term, None
+    else:
+        raise refused("after the quoted name comes /Arity or nothing")
+    if not str(name):
+        raise refused("the name is empty")
+    return str(name), arity
 
 
 # Events: the common shape of recorded events -- plain atoms, numbers, lists and compounds

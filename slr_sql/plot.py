@@ -289,10 +289,14 @@ def store_types(source: Any) -> list[EventTypeRef]:
 
 
 def _split_type(text: str) -> tuple[str, int | None]:
-    name, slash, arity = text.strip().rpartition("/")
-    if slash and arity.isdigit() and name:
-        return name, int(arity)
-    return text.strip(), None
+    """``name/arity`` or ``name`` (a quoted name read as Prolog reads it).
+
+    >>> _split_type(" seg/2 "), _split_type("'x/seen'/2"), _split_type("tf")
+    (('seg', 2), ('x/seen', 2), ('tf', None))
+    """
+    from .parser import parse_indicator
+
+    return parse_indicator(text.strip())
 
 
 def _known_types(catalog: list[EventTypeRef]) -> str:

@@ -46,6 +46,7 @@ from .clocks import (DEFAULT_MAX_LEARNED_DELAY, LearnedDelayNotWrittenWarning,
 from .errors import EventRejected, SLRError, SLRTimeout, SLRUnavailable, log_failure
 from .lockorder import ordered_lock
 from .host import Host
+from .parser import parse_indicator
 from .plans import instantiate
 from .store import DatabaseError, store_error
 from .store.checks import BadEvent, check_times
@@ -128,10 +129,14 @@ def quoted_type_text(key: tuple[str, int]) -> str:
 
 def parse_type(spec: Any) -> tuple[str, int | None]:
     """``"seg/2"`` -> ("seg", 2); ``"seg"`` -> ("seg", None) (every arity); also ``(name, n)``
-    tuples and the terms ``seg/2`` / ``seg``.
+    tuples and the terms ``seg/2`` / ``seg``. A text whose name is quoted is read as Prolog
+    reads it (:func:`slr_sql.parser.parse_indicator`): ``"'x/seen'/2"`` is the type
+    ``x/seen`` of two arguments, as ``"x/seen/2"`` is.
 
     >>> parse_type("seg/2"), parse_type("seg"), parse_type(("tf", 3))
     (('seg', 2), ('seg', None), ('tf', 3))
+    >>> parse_type("'x/seen'/2"), parse_type("x/seen/2"), parse_type("'it''s'")
+    (('x/seen', 2), ('x/seen', 2), ("it's", None))
     """
     if isinstance(spec, tuple) and len(spec) == 2:
         return str(spec[0]), (None if spec[1] is None else int(spec[1]))
@@ -142,6 +147,9 @@ def parse_type(spec: Any) -> tuple[str, int | None]:
             return str(name), n
     elif isinstance(t, str) and type(t) is not Var:
         text = str(t)
+        if type(t) is str and text.startswith("'"):
+            # (text given as Prolog writes the indicator; an atom of a term is read already)
+            return parse_indicator(text)
         name, sep, n = text.rpartition("/")
         if sep and name and n.isdigit():
             return name, int(n)

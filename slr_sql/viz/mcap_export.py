@@ -87,17 +87,23 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
     [('seg', 2), ('seg', 3)]
     >>> select_types([("a/b", 1), ("a", 2)], ["a/b/1", "a"])
     [('a/b', 1), ('a', 2)]
+    >>> select_types([("a/b", 1), ("a", 2)], ["'a/b'/1"])    # quoted as Prolog writes it
+    [('a/b', 1)]
     """
+    from ..parser import parse_indicator
+
     available = sorted(available)
     wanted = list(wanted)
     if not wanted:
         return available
     out: list = []
     for spec in wanted:
-        # ``name/arity`` (cut at the last slash: a name may hold slashes, 'a/b'), or a name
-        name, _, arity = spec.rpartition("/")
+        # ``name/arity`` (cut at the last slash: a name may hold slashes, 'a/b'), or a name;
+        # a quoted name read as Prolog reads it ('a/b'/1)
+        name, arity = parse_indicator(spec)
+        whole = not spec.startswith("'")
         found = [k for k in available
-                 if k[0] == spec or (arity.isdigit() and k[0] == name and str(k[1]) == arity)]
+                 if (whole and k[0] == spec) or (k[0] == name and arity in (None, k[1]))]
         if not found:
             # (names as the summary prints them: a name's line break was a line of the
             # message of its own)
