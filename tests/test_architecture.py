@@ -217,6 +217,67 @@ def test_raw_statements_only_in_the_store_and_the_compilers():
     assert not shrunk, f"fewer raw calls now: lower RAW_CALLS_ALLOWED to {shrunk}"
 
 
+# Every row a SQLite connection of the store reads goes through store/stored_text.py's
+# fetch_rows or fetch_row: sqlite3's decoding in C, and a text that is no UTF-8 read with
+# U+FFFD and a warning, not an error for its whole table (no connection has a text_factory:
+# it cost a call per text cell). A cursor's own fetchall/fetchmany/fetchone, or a loop over
+# a connection's execute(), would raise sqlite3's error for such a text. PostgreSQL's driver
+# (store/postgres.py) refuses such text when it is written. Allowed, with their counts:
+# bounded_builtins.py's private in-memory connection reads a built-in's result, not a
+# stored text (its error is said in words: tests/test_bounded_trim_json.py).
+_FETCHES = {"fetchall", "fetchmany", "fetchone"}
+FETCHES_ALLOWED = {"store/bounded_builtins.py": 1}
+
+
+def _names_a_connection(node: ast.expr) -> bool:
+    return isinstance(node, ast.Name) and node.id in {"conn", "copy", "connection"} or \
+        isinstance(node, ast.Attribute) and node.attr == "conn"
+
+
+def _own_fetches(tree: ast.Module) -> list[int]:
+    """Lines of ``tree`` that read a sqlite3 cursor's rows themselves."""
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+                and node.func.attr in _FETCHES:
+            lines.append(node.lineno)
+        iterated = [node.iter] if isinstance(node, (ast.For, ast.comprehension)) else \
+            list(node.args) if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+            and node.func.id in {"list", "tuple", "set", "dict", "sorted", "next", "iter"} \
+            else []
+        lines.extend(it.lineno for it in iterated
+                     if isinstance(it, ast.Call) and isinstance(it.func, ast.Attribute)
+                     and it.func.attr == "execute" and _names_a_connection(it.func.value))
+    return lines
+
+
+def test_the_stores_rows_are_read_through_stored_text():
+    found = {}
+    for path in MODULES:
+        rel = str(path.relative_to(PACKAGE))
+        if rel.startswith("store/") and rel not in ("store/stored_text.py",
+                                                   "store/postgres.py"):
+            lines = _own_fetches(_tree(path))
+            if lines:
+                found[rel] = len(lines)
+    grown = {rel: n for rel, n in found.items() if n > FETCHES_ALLOWED.get(rel, 0)}
+    assert not grown, (f"rows read past store/stored_text.py's fetch_rows/fetch_row: {grown} "
+                       "(a text that is no UTF-8 would fail the read)")
+    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in FETCHES_ALLOWED.items()
+              if found.get(rel, 0) < n}
+    assert not shrunk, f"fewer own fetches now: lower FETCHES_ALLOWED to {shrunk}"
+
+
+def test_the_check_of_own_fetches_sees_each_kind():
+    tree = ast.parse("rows = conn.execute('SELECT 1').fetchall()\n"
+                     "for row in self.db.conn.execute('SELECT 1'): pass\n"
+                     "names = {r[0] for r in copy.execute('SELECT 1')}\n"
+                     "pairs = dict(conn.execute('SELECT 1, 2'))\n"
+                     "fine = [r for r in self.db.execute('SELECT 1')]\n"
+                     "also = fetch_rows(conn.execute('SELECT 1'))\n")
+    assert sorted(_own_fetches(tree)) == [1, 2, 3, 4]
+
+
 # SQL only one engine understands is printed by that engine's dialect (store/dialect.py and
 # its query printers): none in the query compiler or the planner; today's
 # offenders above them are listed with their counts of lines, which may only go down.

@@ -37,6 +37,8 @@ import sqlite3
 import sys
 from typing import Any
 
+from .stored_text import fetch_row
+
 __all__ = ["SqlGuard", "harden_connection", "fts3_tokenizer_switch_off", "DENIED_FUNCTIONS",
            "DENIED_PRAGMAS", "READING_PRAGMAS", "ACTING_PRAGMAS", "STORE_SETTING_PRAGMAS",
            "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES", "transaction_control_refusal",
@@ -350,7 +352,7 @@ def _connection_handle(conn: sqlite3.Connection, library: Any) -> int | None:
     if ctypes.c_void_p.from_address(handle).value != library.sqlite3_vfs_find(None):
         return None  # not an sqlite3 struct (whose first field is its VFS)
     try:
-        opened = conn.execute("PRAGMA database_list").fetchone()[2]
+        opened = fetch_row(conn.execute("PRAGMA database_list"))[2]
     except sqlite3.Error:
         return None
     named = library.sqlite3_db_filename(handle, b"main")

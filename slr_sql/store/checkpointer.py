@@ -31,6 +31,7 @@ import threading
 from ..errors import SLRError, SLRStoreGone, log_failure
 from .authorizer import harden_connection
 from .sqltext import busy_error, file_identity, file_uri, store_error
+from .stored_text import fetch_row
 
 __all__ = ["WalCheckpointer", "CHECKPOINT_MODES", "CHECKPOINT_INTERVAL"]
 
@@ -85,7 +86,7 @@ class WalCheckpointer:
                         raise gone
                     if conn is None:
                         conn = self._connect()
-                    busy, log, copied = conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
+                    busy, log, copied = fetch_row(conn.execute("PRAGMA wal_checkpoint(PASSIVE)"))
                 except (sqlite3.Error, SLRError) as exc:
                     if busy_error(exc, self.path) is not None or \
                             getattr(exc, "sqlite_errorcode", 0) & 0xFF == sqlite3.SQLITE_LOCKED:

@@ -48,7 +48,7 @@ from .functions import SqlFunctions
 from .schema import migrate, migrate_new_memory_store, migration_scripts
 from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
 from .sqltext import file_identity as _file_identity, file_uri as _file_uri
-from .stored_text import read_text
+from .stored_text import fetch_row, fetch_rows
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout", "is_postgres_url"]
@@ -381,8 +381,8 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
             conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
             try:
                 harden(conn)
-                objects = conn.execute("SELECT type, name FROM sqlite_master").fetchall()
-                version = conn.execute("PRAGMA user_version").fetchone()[0]
+                objects = fetch_rows(conn.execute("SELECT type, name FROM sqlite_master"))
+                version = fetch_row(conn.execute("PRAGMA user_version"))[0]
                 return objects, version
             finally:
                 conn.close()
@@ -638,7 +638,7 @@ class Database:
             self.max_parameters = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
             # but one that wants the write lock: only a new file gets it)
-            if conn.execute("PRAGMA page_count").fetchone()[0] == 0:
+            if fetch_row(conn.execute("PRAGMA page_count"))[0] == 0:
                 conn.execute("PRAGMA auto_vacuum=INCREMENTAL")
             if self.path is not None and new:
                 conn.execute("PRAGMA journal_mode=WAL")
@@ -654,7 +654,7 @@ class Database:
             # an existing store is in WAL already (switching again would want a lock); an
             # adopted file is switched only once its migrations succeeded
             if self.path is not None and not new and not self.read_only and \
-                    conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+                    fetch_row(conn.execute("PRAGMA journal_mode"))[0].lower() != "wal":
                 conn.execute("PRAGMA journal_mode=WAL")
             background = checkpoint == "background" and self.path is not None \
                 and not self.read_only
@@ -814,7 +814,7 @@ class Database:
                     elif name not in made:
                         copy.execute(statement)
                         made[name] = statement
-                plan = copy.execute("EXPLAIN QUERY PLAN " + sql, _AnyParameters()).fetchall()
+                plan = fetch_rows(copy.execute("EXPLAIN QUERY PLAN " + sql, _AnyParameters()))
             except (sqlite3.Error, ValueError, TypeError):
                 steps = None
             else:
@@ -857,7 +857,7 @@ class Database:
         """The in-memory copy of the schema :meth:`hypothetical_plan` asks, the extra
         indexes made in it since (name -> statement), the catalog's index names, and the
         plans it gave (lock held)."""
-        version = self.conn.execute("PRAGMA schema_version").fetchone()[0]
+        version = fetch_row(self.conn.execute("PRAGMA schema_version"))[0]
         if self._planning is not None and self._planning[0] == version:
             return self._planning[1], self._planning[2], self._planning[3], self._planning[4]
         self._forget_planning_copy()
@@ -868,11 +868,11 @@ class Database:
         harden(copy)
         if self.functions is not None:
             register_functions(copy, self.functions)
-        rows = self.conn.execute(
+        rows = fetch_rows(self.conn.execute(
             "SELECT type, name, sql FROM sqlite_master WHERE sql IS NOT NULL AND type IN "
             "('table', 'index') UNION ALL SELECT type, name, sql FROM sqlite_temp_master "
             "WHERE sql IS NOT NULL AND type IN ('table', 'index') "
-            "ORDER BY 1 DESC").fetchall()   # tables before their indexes
+            "ORDER BY 1 DESC"))   # tables before their indexes
         catalog = set()
         for kind, name, statement in rows:
             if not name.lower().startswith("sqlite_"):
@@ -981,7 +981,7 @@ class Database:
                 self.suspend_streams()  # iterators still open: they fail when read again
                 if self.path is not None:
                     try:
-                        self.conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
+                        fetch_rows(self.conn.execute("PRAGMA wal_checkpoint(PASSIVE)"))
                     except sqlite3.OperationalError:
                         pass  # best effort: the WAL is checkpointed on the next open anyway
             finally:
@@ -1425,7 +1425,7 @@ class Database:
             with self._deadline(deadline, "the SQL statement"):
                 cursor = conn.execute(query, bound_parameters(params))
                 columns = [d[0] for d in cursor.description] if cursor.description else []
-                return columns, cursor.fetchall(), guard.written
+                return columns, fetch_rows(cursor), guard.written
         except sqlite3.DatabaseError as exc:
             if _refused(str(exc), guard):
                 raise SLRError(f"sql: {guard.denied}") from None
@@ -1449,8 +1449,8 @@ class Database:
         with self.lock:
             self.check_open()
             try:
-                return self.conn.execute(
-                    sql, params if type(params) is tuple else tuple(params)).fetchall()
+                return fetch_rows(self.conn.execute(
+                    sql, params if type(params) is tuple else tuple(params)))
             except sqlite3.Error as exc:
                 raise self.failure(exc) from None
 
@@ -1559,7 +1559,7 @@ class Database:
                                     stops=stops):
                     cursor = self.conn.execute(sql, params)
                     try:
-                        return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                        return fetch_rows(cursor, limit)
                     finally:
                         cursor.close()
             except sqlite3.Error as exc:
@@ -1761,9 +1761,10 @@ def run_commit_callbacks(callbacks: CommitCallbacks) -> None:
 
 
 def harden(conn: sqlite3.Connection) -> SqlGuard:
-    """:func:`~slr_sql.store.authorizer.harden_connection`, the wrapped built-ins of
-    :mod:`~slr_sql.store.bounded_builtins` and :data:`~slr_sql.store.stored_text.read_text`:
-    what every connection of the store gets.
+    """:func:`~slr_sql.store.authorizer.harden_connection` and the wrapped built-ins of
+    :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets. (Its
+    rows are read with :func:`~slr_sql.store.stored_text.fetch_rows`, which reads a text
+    that is no UTF-8 with U+FFFD and a warning, not an error for its whole table.)
 
     >>> conn = sqlite3.connect(":memory:"); guard = harden(conn)
     >>> conn.execute("SELECT printf('%.*c', 2000000000, 'x')").fetchall()  # at once, not in 9 s
@@ -1775,9 +1776,6 @@ def harden(conn: sqlite3.Connection) -> SqlGuard:
     """
     guard = harden_connection(conn)
     register_functions(conn, bounded_builtins(conn, guard))
-    # a text another program wrote that is no UTF-8 is read with U+FFFD and a warning, not
-    # an error that makes every read of its table fail
-    conn.text_factory = read_text
     return guard
 
 
@@ -1804,7 +1802,7 @@ def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
     rows: list[tuple] = []
     size = 0
     while True:
-        batch = cursor.fetchmany(256)
+        batch = fetch_rows(cursor, 256)
         if not batch:
             return rows
         for row in batch:
@@ -1935,7 +1933,7 @@ class ReadConnection:
             if self.closed:
                 raise SLRError("the event store is closed")
             try:
-                return self.conn.execute(sql, tuple(params)).fetchall()
+                return fetch_rows(self.conn.execute(sql, tuple(params)))
             except sqlite3.Error as exc:
                 raise self._error(exc) from None
 
@@ -1974,8 +1972,7 @@ def run_sql_file(path: str | os.PathLike, query: str,
             conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
         cursor = conn.execute(query)
         columns = [d[0] for d in cursor.description or ()]
-        return columns, ([tuple(row) for row in cursor.fetchall()] if write
-                         else _bounded_rows(cursor))
+        return columns, (fetch_rows(cursor) if write else _bounded_rows(cursor))
     except sqlite3.Error as exc:
         text = str(exc)
         if _refused(text, guard) and guard.denied is not None:

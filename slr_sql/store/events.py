@@ -20,6 +20,7 @@ from ..errors import EventRejected
 from .checks import BadEvent, arguments_problem, check_times, event_rejection, \
     shown, text_problem
 from .connection import Database
+from .stored_text import fetch_row
 from .tables import EventTables, EventType
 
 __all__ = ["Event", "EventBatch", "EventWriter"]
@@ -369,8 +370,8 @@ class EventWriter:
             return _MULTI_ROW_TABLE_ROWS + count
         bound = self._rows_bound.get(quoted)
         if bound is None or bound + count > _MULTI_ROW_TABLE_ROWS:
-            span = self.db.conn.execute(f"SELECT (SELECT max(seq) FROM {quoted}) - "
-                                        f"(SELECT min(seq) FROM {quoted})").fetchone()[0]
+            span = fetch_row(self.db.conn.execute(f"SELECT (SELECT max(seq) FROM {quoted}) - "
+                                                  f"(SELECT min(seq) FROM {quoted})"))[0]
             bound = span or 0
             if bound > _MULTI_ROW_TABLE_ROWS:
                 self._large_tables.add(quoted)

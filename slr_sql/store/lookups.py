@@ -22,6 +22,7 @@ from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
 from .dialect import short_text
 from .sqltext import joined_balanced, quote_identifier
+from .stored_text import fetch_row, fetch_rows
 from .tables import EventTables, EventType
 
 __all__ = ["Row", "RawPage", "EventReader", "null_argument_text"]
@@ -71,7 +72,7 @@ def _first_of_signs(cursor: Any, signs: tuple[tuple[int, float], ...]) -> Any:
     ``signs`` have those signs; None when none has. The cursor is closed (its statement
     stops there)."""
     try:
-        for row in cursor:
+        while (row := fetch_row(cursor)) is not None:
             if all(math.copysign(1.0, row[p + 1]) == sign for p, sign in signs):
                 return row
         return None
@@ -285,7 +286,7 @@ class EventReader:
                                     if last is None else \
                                     db.conn.execute(statement_sql(True), params + list(
                                         key(last[arity], last[arity + 1], last[arity + 2])))
-                            rows = statement.cursor.fetchmany(batch)
+                            rows = fetch_rows(statement.cursor, batch)
                             break
                         except sqlite3.Error as exc:
                             # "abort due to ROLLBACK": read again after the last row
@@ -532,8 +533,8 @@ class EventReader:
             sql = self._latest_sql(event_type, positions, point, far)
         try:   # (the prev lookup: execute's mapping without its lock and check, made above)
             bound = self._bound(values, far)
-            rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *bound, *bound,
-                                         float(t))).fetchall()
+            rows = fetch_rows(db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *bound,
+                                                    *bound, float(t))))
         except sqlite3.Error as exc:
             raise db.failure(exc) from None
         if db.dialect.from_column is None:

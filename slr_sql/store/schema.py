@@ -22,6 +22,7 @@ from typing import Any
 
 from ..errors import SLRError
 from .sqltext import busy_error, quote_identifier, split_sql_script
+from .stored_text import fetch_row, fetch_rows
 
 __all__ = ["migration_scripts", "migrate", "migrate_new_memory_store", "applied_migrations"]
 
@@ -93,11 +94,12 @@ def applied_migrations(conn: sqlite3.Connection,
     >>> sorted(applied_migrations(conn)) == [n for n, _, _ in migration_scripts()]
     True
     """
-    current = conn.execute("PRAGMA user_version").fetchone()[0]
-    has_table = conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' "
-                             "AND name = 'slr_migrations'").fetchone()
+    current = fetch_row(conn.execute("PRAGMA user_version"))[0]
+    has_table = fetch_row(conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' "
+                                       "AND name = 'slr_migrations'"))
     if has_table:
-        return {row[0] for row in conn.execute("SELECT number FROM slr_migrations")}
+        return {row[0] for row in
+                fetch_rows(conn.execute("SELECT number FROM slr_migrations"))}
     return {number for number, _, _ in (migration_scripts() if scripts is None else scripts)
             if number <= current}
 
@@ -107,7 +109,8 @@ def _per_event_table(conn: sqlite3.Connection, statement: str) -> list[str]:
     (the quoted table name in its place): a migration that changes every event table."""
     if "{event_table}" not in statement:
         return [statement]
-    tables = [row[0] for row in conn.execute("SELECT table_name FROM slr_event_types")]
+    tables = [row[0] for row in
+              fetch_rows(conn.execute("SELECT table_name FROM slr_event_types"))]
     return [statement.replace("{event_table}", quote_identifier(t)) for t in tables]
 
 
@@ -115,13 +118,14 @@ def _never_reused_sequences(conn: sqlite3.Connection) -> None:
     """Rebuild every event table whose ``seq`` is a plain ``INTEGER PRIMARY KEY`` with
     ``AUTOINCREMENT``, keeping its rows (sequences included), indexes and triggers: SQLite
     cannot add AUTOINCREMENT to a table in place (the documented copy, drop, rename)."""
-    tables = [row[0] for row in conn.execute("SELECT table_name FROM slr_event_types")]
+    tables = [row[0] for row in
+              fetch_rows(conn.execute("SELECT table_name FROM slr_event_types"))]
     for table in tables:
-        row = conn.execute("SELECT sql FROM sqlite_master WHERE type = 'table' AND name = ?",
-                           (table,)).fetchone()
+        row = fetch_row(conn.execute("SELECT sql FROM sqlite_master WHERE type = 'table' "
+                                     "AND name = ?", (table,)))
         if row is None or re.search(r"\bAUTOINCREMENT\b", row[0], re.IGNORECASE):
             continue
-        info = conn.execute(f"PRAGMA table_info({quote_identifier(table)})").fetchall()
+        info = fetch_rows(conn.execute(f"PRAGMA table_info({quote_identifier(table)})"))
         columns = [(name, kind, notnull) for _, name, kind, notnull, _, _ in info]
         if not columns or columns[0][0] != "seq":
             continue
@@ -129,9 +133,9 @@ def _never_reused_sequences(conn: sqlite3.Connection) -> None:
             f"{quote_identifier(name)}{' ' + kind if kind else ''}"
             f"{' NOT NULL' if notnull else ''}" for name, kind, notnull in columns[1:]]
         names = ", ".join(quote_identifier(name) for name, _, _ in columns)
-        others = conn.execute("SELECT sql FROM sqlite_master WHERE tbl_name = ? AND type IN "
-                              "('index', 'trigger') AND sql IS NOT NULL ORDER BY type, name",
-                              (table,)).fetchall()
+        others = fetch_rows(conn.execute(
+            "SELECT sql FROM sqlite_master WHERE tbl_name = ? AND type IN ('index', "
+            "'trigger') AND sql IS NOT NULL ORDER BY type, name", (table,)))
         new = quote_identifier(f"slr_rebuild__{table}")
         conn.execute(f"CREATE TABLE {new} ({', '.join(definitions)})")
         conn.execute(f"INSERT INTO {new} ({names}) SELECT {names} FROM "
@@ -175,17 +179,17 @@ def _unambiguous_fleet_mark_keys(conn: sqlite3.Connection) -> None:
     """Rewrite the fleet mark keys of version 13 and before into the escaped form of
     :func:`slr_sql.store.fleet_keys.fleet_mark_key` (see ``0014_fleet_mark_keys.sql``)."""
     from .fleet_keys import FLEET_MARK, fleet_mark_key
-    known = {row[0] for row in conn.execute(
+    known = {row[0] for row in fetch_rows(conn.execute(
         "SELECT name FROM slr_robots UNION SELECT robot FROM slr_fleet_robots "
-        "UNION SELECT robot FROM slr_fleet_routes UNION SELECT via FROM slr_fleet_routes")}
-    own = conn.execute("SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
+        "UNION SELECT robot FROM slr_fleet_routes UNION SELECT via FROM slr_fleet_routes"))}
+    own = fetch_row(conn.execute("SELECT value FROM slr_meta WHERE key = 'robot'"))
     if own is not None:
         try:
             known.add(json.loads(own[0]))
         except ValueError:
             pass
-    rows = conn.execute("SELECT key, value FROM slr_meta WHERE substr(key, 1, ?) = ?",
-                        (len(FLEET_MARK), FLEET_MARK)).fetchall()
+    rows = fetch_rows(conn.execute("SELECT key, value FROM slr_meta WHERE "
+                                   "substr(key, 1, ?) = ?", (len(FLEET_MARK), FLEET_MARK)))
     rewritten = []
     for key, value in rows:
         reading = old_fleet_mark_reading(key[len(FLEET_MARK):], known)
@@ -220,7 +224,7 @@ def migrate(conn: sqlite3.Connection, path: str | None,
     if scripts is None:
         scripts = migration_scripts()
     latest = scripts[-1][0] if scripts else 0
-    current = conn.execute("PRAGMA user_version").fetchone()[0]
+    current = fetch_row(conn.execute("PRAGMA user_version"))[0]
     if current > latest:
         raise SLRError(f"{path}: database schema version {current} is newer than this "
                        f"slr_sql supports ({latest}); upgrade slr_sql")
@@ -254,7 +258,7 @@ def migrate(conn: sqlite3.Connection, path: str | None,
         conn.executemany("INSERT OR IGNORE INTO slr_migrations (number, name, applied_at) "
                          "VALUES (?, ?, julianday('now'))",
                          [(n, names.get(n, "?")) for n in sorted(applied)])
-        version = conn.execute("PRAGMA user_version").fetchone()[0]
+        version = fetch_row(conn.execute("PRAGMA user_version"))[0]
         conn.execute(f"PRAGMA user_version = {int(max([version, *applied]))}")
         conn.execute("COMMIT")
     except BaseException:

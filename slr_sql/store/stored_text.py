@@ -4,26 +4,31 @@ SQLite stores whatever bytes it is given as TEXT: another program (the ``sqlite3
 with ``CAST(x'ff' AS TEXT)``, Python's sqlite3 writing bytes where text was meant) can
 leave a value that is no UTF-8. Python's sqlite3 refuses such a value when it reads it
 ("Could not decode to UTF-8 column ..."), so one bad row made every query, ``sql`` and
-``describe`` that read its event type fail. Every connection of the store reads text with
-:data:`read_text` instead: valid UTF-8 decoded in C (sqlite3 makes a bytes object of each
-text first: docs/printed_text.md gives the cost), each bad byte sequence as U+FFFD, and a
+``describe`` that read its event type fail. The store reads every row through
+:func:`fetch_rows` (or :func:`fetch_row`): sqlite3's own decoding, in C with no call per
+text, and only from a row it cannot decode on the connection's ``text_factory`` set to
+:data:`read_text` for the rest of that fetch: each bad byte sequence read as U+FFFD, and a
 :class:`StoredTextWarning` that gives the bytes and how to find the row
-(docs/printed_text.md, "Text that is no UTF-8"). PostgreSQL checks the text it is given,
-so a PostgreSQL store cannot hold such a value.
+(docs/printed_text.md, "Text that is no UTF-8"). A text factory on every read cost sqlite3
+a bytes object and a call per text cell (docs/printed_text.md gives the figures).
+PostgreSQL checks the text it is given, so a PostgreSQL store cannot hold such a value.
 
->>> import sqlite3; conn = sqlite3.connect(":memory:"); conn.text_factory = read_text
+>>> import sqlite3; conn = sqlite3.connect(":memory:")
 >>> with warnings.catch_warnings(record=True) as caught:
 ...     warnings.simplefilter("always")
-...     conn.execute("SELECT 'café', CAST(x'677265ff6e' AS TEXT)").fetchone()
-('café', 'gre\ufffdn')
->>> [w.category.__name__ for w in caught]
-['StoredTextWarning']
+...     fetch_rows(conn.execute("SELECT 'café' UNION ALL SELECT CAST(x'677265ff6e' AS TEXT)"))
+[('café',), ('gre\ufffdn',)]
+>>> [w.category.__name__ for w in caught], conn.text_factory is str
+(['StoredTextWarning'], True)
 """
 from __future__ import annotations
 
 import codecs
 import functools
+import sqlite3
 import warnings
+from itertools import islice
+from typing import Any
 
 from ..printable import log_text
 
@@ -79,5 +84,65 @@ def _replace_and_warn(exc: UnicodeError) -> tuple[str, int]:
 codecs.register_error(ERRORS, _replace_and_warn)
 
 read_text = functools.partial(str, encoding="utf-8", errors=ERRORS)
-r"""A SQLite connection's ``text_factory``: ``str(data, "utf-8")`` in C, the handler in
-Python only for a text that is no UTF-8 (the module's example)."""
+r"""The ``text_factory`` :func:`fetch_rows` reads on with once a row held text that is no
+UTF-8: ``str(data, "utf-8")`` in C, the handler in Python only for a text that is no UTF-8
+(the module's example)."""
+
+NOT_UTF8_ERROR = "Could not decode to UTF-8"
+"""How sqlite3's error for a text that is no UTF-8 begins (``OperationalError``)."""
+
+
+def fetch_rows(cursor: sqlite3.Cursor, limit: int | None = None) -> list[Any]:
+    r"""The rows of ``cursor`` still to be read (at most ``limit``), as ``fetchall()`` (or
+    ``fetchmany(limit)``) gives them, but a text that is no UTF-8 read with U+FFFD and a
+    :class:`StoredTextWarning`: every read of a store connection goes through here (or
+    :func:`fetch_row`; tests/test_architecture.py). The statement runs once: nothing is
+    run again, so a statement that wrote (``RETURNING``) is not written twice.
+
+    sqlite3 decodes text in C unless the connection has a ``text_factory``, which costs a
+    bytes object and a call for every text cell read; so the rows are read without one.
+    sqlite3 builds a row before it steps its statement to the next one, so a row it cannot
+    decode is still the current one when the error is raised, and the rows before it are
+    in ``rows`` (``list.extend`` keeps what it appended when its iterator fails, where
+    ``fetchall`` loses them): the rest is read on from that row with :data:`read_text`,
+    which is set for that only (the connection's next reads pay nothing).
+
+    >>> import sqlite3; conn = sqlite3.connect(":memory:")
+    >>> cursor = conn.execute("SELECT 'a' UNION ALL SELECT CAST(x'ff' AS TEXT) "
+    ...                       "UNION ALL SELECT 'c'")
+    >>> with warnings.catch_warnings(record=True):
+    ...     fetch_rows(cursor, 1), fetch_rows(cursor, 1), fetch_rows(cursor)
+    ([('a',)], [('\ufffd',)], [('c',)])
+    """
+    rows: list[Any] = []
+    try:
+        rows.extend(cursor if limit is None else islice(cursor, limit))
+    except sqlite3.OperationalError as exc:
+        if not str(exc).startswith(NOT_UTF8_ERROR):
+            raise
+        connection = cursor.connection
+        factory = connection.text_factory
+        connection.text_factory = read_text
+        try:
+            rows.extend(cursor if limit is None else islice(cursor, limit - len(rows)))
+        finally:
+            # (the one it had: a fetch nested in this one, by a Python function the
+            # statement calls, leaves this one's in force)
+            connection.text_factory = factory
+    return rows
+
+
+def fetch_row(cursor: sqlite3.Cursor) -> Any:
+    r"""The next row of ``cursor`` (None when there is none), as ``fetchone()`` gives it,
+    a text that is no UTF-8 read as :func:`fetch_rows` reads it.
+
+    >>> import sqlite3; conn = sqlite3.connect(":memory:")
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     fetch_row(conn.execute("SELECT 1, CAST(x'61ff' AS TEXT)")), len(caught)
+    ((1, 'a\ufffd'), 1)
+    >>> fetch_row(conn.execute("SELECT 1 WHERE 0")) is None
+    True
+    """
+    rows = fetch_rows(cursor, 1)
+    return rows[0] if rows else None
