@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterable, Iterator
 from .answers import answer_bindings
 from .arguments import (ListenerList, check_callable, check_flag, check_option_names,
                         check_time_option)
-from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from .api import PendingQueryAPI, ProgramInfo, SolutionsAPI, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
 from .encoding import NullArgument, event_form_loop
@@ -660,7 +660,7 @@ class KnowledgeBase:
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
                   timeout: float | None = None,
-                  robot: str | None = None) -> "Solutions":
+                  robot: str | None = None) -> SolutionsAPI:
         """The answers of ``goal`` one at a time, as they are found (unsynchronized): what
         :meth:`query` returns, lazily. A consumer that stops early (a command line's
         ``--limit``, a shell's "stop") never pays for the rest, so a goal with endless answers

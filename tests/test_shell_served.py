@@ -5,8 +5,10 @@ is interrupted or goes away. The server's `/health` says what it still runs."""
 from __future__ import annotations
 
 import json
+import queue
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -254,3 +256,63 @@ def test_a_server_without_solutions_is_asked_with_one_query(tmp_path):
     finally:
         proc.terminate()
         proc.communicate(timeout=DEADLINE)
+
+
+@pytest.mark.parametrize("where", ["local", "served"])
+def test_stop_from_another_thread_ends_the_search_for_the_next_answer(server, where):
+    """`solutions(...).stop()`: the search for the next answer, under way in another thread
+    (no answer for ever), ends with an SLRError, on a local knowledge base as over the
+    service, where the server's query ends too."""
+    searching = threading.Event()
+    if where == "local":
+        kb = slr_sql.open()
+        kb.define("searching", 0, lambda: searching.set() or True)
+        goal = "(X = 1 ; searching, repeat, fail)"
+    else:
+        kb = slr_sql.connect(server.url)
+        goal = "(X = 1 ; repeat, fail)"
+    outcome: queue.Queue = queue.Queue()
+
+    def search() -> None:
+        try:
+            outcome.put(next(answers))
+        except BaseException as exc:  # noqa: BLE001 - what ended it is the test's answer
+            outcome.put(exc)
+
+    with kb:
+        answers = kb.solutions(goal, timeout=600)
+        assert next(answers) == {"X": 1}
+        threading.Thread(target=search, daemon=True).start()
+        if where == "local":
+            assert searching.wait(DEADLINE)
+        else:
+            wait_for_queries(server, running=1, solutions=1)
+        answers.stop()
+        ended = outcome.get(timeout=DEADLINE)
+        assert isinstance(ended, slr_sql.SLRError) and \
+            str(ended) == "the query was stopped while it looked for its next answer", ended
+        with pytest.raises(slr_sql.SLRError, match="stopped"):
+            next(answers)
+    if where == "served":
+        wait_for_queries(server, running=0, solutions=0)
+
+
+def test_a_server_stopping_with_a_query_open_at_an_answer_stops_at_once(tmp_path):
+    """A query left open at an answer holds no stopping server (600 s of grace here): it is
+    closed with the connection, and the shell's next `;` says so in words."""
+    with ServiceProcess(tmp_path / "robot.db", "--max-query-time", "600",
+                        "--shutdown-grace", "600") as own:
+        shell = PipedShell(own.url)
+        try:
+            shell.send("between(1, inf, X).")
+            assert shell.expect("X = 1", deadline=DEADLINE) == "X = 1"
+            wait_for_queries(own, solutions=1)
+            own.proc.terminate()
+            assert own.proc.wait(timeout=DEADLINE) == 0
+            shell.send(";")
+            out, errors = shell.end()
+        finally:
+            shell.kill()
+    assert out == " ;\n"
+    assert errors.startswith("error: the query's connection closed") and \
+        errors.count("\n") == 1 and "Traceback" not in errors, errors

@@ -915,23 +915,18 @@ class _Service:
             reader = asyncio.create_task(asks.read(websocket))
             seq = 0
             while True:
-                # one answer, while the client's end (or the server's stop) is watched
+                # one answer, while the client's end is watched (a stopping server closes
+                # the connection: its end too)
                 step = asyncio.ensure_future(query.next_answer())
                 ended = asyncio.ensure_future(asks.ended.wait())
-                stopping = asyncio.ensure_future(self.stopping.wait())
                 try:
-                    await asyncio.wait({step, ended, stopping},
-                                       return_when=asyncio.FIRST_COMPLETED)
+                    await asyncio.wait({step, ended}, return_when=asyncio.FIRST_COMPLETED)
                 finally:
                     ended.cancel()
-                    stopping.cancel()
                 if not step.done():
                     await query.abandon(step)
                     if asks.error is not None:
                         raise asks.error
-                    if not asks.ended.is_set():    # the server stops
-                        raise ServiceUnavailable("the server is stopping: the query was "
-                                                 "stopped; ask again")
                     await _close_quietly(websocket)
                     break
                 answer = step.result()             # (the query's error is raised here)
@@ -944,7 +939,7 @@ class _Service:
                                                  "answer": encode_answers([answer])[0]})
                                           .decode("utf-8"))
                 try:
-                    asked = await asks.next_request(query.time_left(), self.stopping)
+                    asked = await asks.next_request(query.time_left())
                 except TimeoutError:
                     raise SLRTimeout(f"query timed out after {budget:g} s (its time counts "
                                      f"from the first request, the waits for the next "
@@ -953,9 +948,6 @@ class _Service:
                 if not asked:
                     if asks.error is not None:
                         raise asks.error
-                    if not asks.ended.is_set():
-                        raise ServiceUnavailable("the server is stopping: the query was "
-                                                 "stopped; ask again")
                     await _close_quietly(websocket)
                     break
         except WebSocketDisconnect:
@@ -1002,6 +994,14 @@ class _Service:
                        "end / error messages; with \"ack\": true send {\"op\": \"ack\", "
                        "\"seq\": N} for the answers handled (docs/service.md).",
             "operationId": "subscribe",
+            "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
+        paths["/solutions"] = {"get": {
+            "summary": "WebSocket: a goal's answers one at a time (kb.solutions); send {\"op\": "
+                       "\"solutions\", \"goal\", \"args\", \"at\", \"timeout\", \"robot\"} "
+                       "for the first answer and {\"op\": \"next\"} for each next one, "
+                       "receive answer / end / error messages; closing the WebSocket or "
+                       "{\"op\": \"close\"} ends the query (docs/service.md).",
+            "operationId": "solutions",
             "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
         return {"openapi": "3.1.0",
                 "info": {"title": "slr_sql service", "version": slr_sql.__version__,
@@ -1682,20 +1682,14 @@ class _Asks:
             self.ended.set()
             self._changed.set()
 
-    async def next_request(self, timeout: float, stopping: asyncio.Event) -> bool:
-        """True once the client asked for the next answer; False when it ended, or the
-        server stops; TimeoutError after ``timeout`` seconds."""
+    async def next_request(self, timeout: float) -> bool:
+        """True once the client asked for the next answer; False when it ended;
+        TimeoutError after ``timeout`` seconds."""
         async with asyncio.timeout(timeout):
-            while not self.asked and not self.ended.is_set() and not stopping.is_set():
+            while not self.asked and not self.ended.is_set():
                 self._changed.clear()
-                waiting = asyncio.ensure_future(self._changed.wait())
-                stop = asyncio.ensure_future(stopping.wait())
-                try:
-                    await asyncio.wait({waiting, stop}, return_when=asyncio.FIRST_COMPLETED)
-                finally:
-                    waiting.cancel()
-                    stop.cancel()
-        if self.ended.is_set() or not self.asked:
+                await self._changed.wait()
+        if self.ended.is_set():
             return False
         self.asked -= 1
         return True

@@ -57,7 +57,8 @@ from urllib.parse import quote, urlsplit
 
 import slr_sql  # noqa: F401  (the examples' slr_sql.open and slr_sql.connect)
 from slr_sql import EventRejected, SLRError, SLRTimeout, SLRUnavailable
-from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from slr_sql.errors import STOPPED_BY_CALLER
+from slr_sql.api import PendingQueryAPI, ProgramInfo, SolutionsAPI, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
@@ -807,7 +808,7 @@ class RemoteKnowledgeBase:
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
                   timeout: float | None = None,
-                  robot: str | None = None) -> "RemoteSolutions":
+                  robot: str | None = None) -> SolutionsAPI:
         """The answers of ``goal`` one at a time (see ``KnowledgeBase.solutions``), each
         computed by the server when it is asked for (WebSocket ``/solutions``): a goal with
         endless answers gives its first at once. ``close()`` ends the query on the server
@@ -1647,6 +1648,7 @@ class RemoteSolutions:
         self._ws: Any = None
         self._answers: Iterator[dict[str, Any]] | None = None   # an older server's
         self.closed = False
+        self._stopped = False
         from websockets.exceptions import WebSocketException   # (the service extra's)
         self._closed_exc: type[Exception] = WebSocketException
 
@@ -1654,8 +1656,12 @@ class RemoteSolutions:
         return self
 
     def __next__(self) -> dict[str, Any]:
+        if self._stopped:
+            raise SLRError(STOPPED_BY_CALLER)
         if self.closed:
             raise StopIteration
+        if self._client.closed:
+            raise SLRError("the connection to the knowledge base is closed")
         if self._answers is not None:
             return next(self._answers)
         try:
@@ -1697,6 +1703,9 @@ class RemoteSolutions:
             refused = _refused_certificate(exc)
             if refused is not None:
                 raise _not_trusted(client.url, refused) from None
+            if isinstance(exc, OSError):   # no server answered: as for a request
+                raise ServiceUnavailable(f"cannot reach slr serve at {client.url}: {exc}",
+                                         status=0) from None
             raise _not_subscribed(url, exc, "ask") from None
         return True
 
@@ -1710,6 +1719,8 @@ class RemoteSolutions:
             raise ServiceUnavailable(f"the server sent no answer within {wait:g} s",
                                      status=0) from None
         except WebSocketException as exc:
+            if self._stopped:
+                raise SLRError(STOPPED_BY_CALLER) from None
             raise ServiceUnavailable(f"the query's connection closed: {exc}",
                                      status=0) from None
         try:
@@ -1729,8 +1740,33 @@ class RemoteSolutions:
         raise ServiceError(f"unexpected message from the server: {str(message)[:200]}",
                            kind="InternalError", status=0)
 
+    def stop(self) -> None:
+        """End the query from another thread, also while a ``next()`` waits for the server
+        to find an answer: the connection closes (the server stops its search), and that
+        ``next()`` and the later ones raise SLRError, as a local ``Solutions.stop()``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); answers = kb.solutions("repeat")
+        >>> next(answers), answers.stop()
+        ({}, None)
+        >>> next(answers)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: the query was stopped while it looked for its next answer
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        self._stopped = True
+        self.close()
+
     def close(self) -> None:
-        """End the query (on the server too); later ``next()`` calls end the iteration."""
+        """End the query (on the server too); later ``next()`` calls end the iteration.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); answers = kb.solutions("between(1, inf, X)")
+        >>> next(answers), answers.close(), list(answers)
+        ({'X': 1}, None, [])
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         self.closed = True
         self._answers = None
         ws, self._ws = self._ws, None
