@@ -6,7 +6,7 @@
 ...     kb.query("obj(O, cup, C)^T")
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
 """
-from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SolutionsAPI, SubscriptionAPI
 from .arguments import check_option_names
 from .clocks import Clock, ManualClock, StreamClock, WallClock
 from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRBusy, SLRCancelled, SLRError, SLREvaluationError, \
@@ -39,7 +39,7 @@ def connect(url: str, token: str | None = None, **options):
 
 __all__ = [
     "open", "connect", "KnowledgeBase", "KnowledgeBaseAPI", "PendingQueryAPI", "SubscriptionAPI",
-    "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
+    "SolutionsAPI", "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
     "SLRUnavailable", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
     "SLRStatementTimeout", "SLRSubscriptionInUse", "NotAnEvent", "BufferNotFound",

@@ -28,7 +28,8 @@ from typing import Any, Iterator, Protocol, runtime_checkable
 
 from .errors import EventRejected
 
-__all__ = ["KnowledgeBaseAPI", "PendingQueryAPI", "SubscriptionAPI", "ProgramInfo"]
+__all__ = ["KnowledgeBaseAPI", "PendingQueryAPI", "SolutionsAPI", "SubscriptionAPI",
+           "ProgramInfo"]
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,21 @@ class SubscriptionAPI(Protocol):
 
 
 @runtime_checkable
+class SolutionsAPI(Protocol):
+    """The answers of ``kb.solutions``, one at a time: ``for answer in answers``;
+    ``close()`` ends them between two answers, ``stop()`` (from another thread) the search
+    for the next one, which then raises an SLRError."""
+
+    def __iter__(self) -> Iterator[dict[str, Any]]: ...
+
+    def __next__(self) -> dict[str, Any]: ...
+
+    def close(self) -> None: ...
+
+    def stop(self) -> None: ...
+
+
+@runtime_checkable
 class KnowledgeBaseAPI(Protocol):
     """What every knowledge base offers, local (``slr_sql.open``) or remote
     (``slr_sql.connect``). See ``docs/api.md`` for each method."""
@@ -131,7 +147,7 @@ class KnowledgeBaseAPI(Protocol):
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
                   timeout: float | None = None,
-                  robot: str | None = None) -> Iterator[dict[str, Any]]: ...
+                  robot: str | None = None) -> SolutionsAPI: ...
 
     def goal_warnings(self, goal: str) -> list[str]: ...
 

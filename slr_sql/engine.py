@@ -15,12 +15,13 @@ so they need no nested interpreter either.
 from __future__ import annotations
 
 import os
+import threading
 import time
 from math import copysign
 from typing import Any, Callable, Iterator
 
 from .arith import instantiation_error, iso_error, resource_error, type_error, with_context
-from .errors import CLOSED_WHILE_RUNNING, SLRError, SLREvaluationError, SLRTimeout
+from .errors import CLOSED_WHILE_RUNNING, STOPPED_BY_CALLER, SLRError, SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
 from .terms import (Atom, CheckedBodies, Struct, Var, deref, format_atom, format_term,
@@ -149,6 +150,9 @@ class Machine:
         self.sql_calls: dict | None = None   # set by solve(): compiled sub-goals, if allowed
         # the robot whose events every event goal, prev and next reads (None: everyone's)
         self.robot: str | None = None
+        # set from another thread to end this query at its next check of limits (a served
+        # query whose client asked to stop or left: Solutions.stop)
+        self.stop: threading.Event | None = None
         # the bodies check_body walked (\+ \+ ... nested N deep walked each nested body
         # again, N²/2 steps)
         self._bodies = CheckedBodies()
@@ -280,6 +284,8 @@ class Machine:
         """Raise SLRTimeout once the query's time is up: for builtins that loop long inside
         one step (building a list of millions of cells), which the machine's own check
         every 2048 steps would not see in time."""
+        if self.stop is not None and self.stop.is_set():
+            raise SLRError(STOPPED_BY_CALLER)
         if self.deadline is not None and time.monotonic() > self.deadline:
             raise SLRTimeout(f"query timed out after {self.timeout} s "
                              f"({self.steps} inference steps)")
@@ -301,6 +307,8 @@ class Machine:
         self.steps += n
         if self.engine.stopped and not self._in_own_transaction():
             raise SLRError(CLOSED_WHILE_RUNNING)
+        if self.stop is not None and self.stop.is_set():
+            raise SLRError(STOPPED_BY_CALLER)
         if self.max_steps is not None and self.steps > self.max_steps:
             raise SLRTimeout(f"step limit of {self.max_steps} inference steps exceeded")
         if self.deadline is not None and time.monotonic() > self.deadline:

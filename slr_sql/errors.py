@@ -7,12 +7,15 @@ from typing import Any
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
            "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
            "SLRStatementTimeout", "EventRejected", "NotAnEvent", "BufferNotFound", "log_failure",
-           "naming_the_store", "CLOSED_WHILE_RUNNING"]
+           "naming_the_store", "CLOSED_WHILE_RUNNING", "STOPPED_BY_CALLER"]
 
 # The words of the SLRError a query still running when its knowledge base closes ends with:
 # the interpreter's at its next check, a compiled statement's interrupted (SQLite) or
 # cancelled (PostgreSQL) by the close
 CLOSED_WHILE_RUNNING = "the knowledge base was closed while the query ran"
+# ... and the words of one whose consumer stopped it from another thread (Solutions.stop: a
+# served query whose client asked to stop or left), at the interpreter's next check
+STOPPED_BY_CALLER = "the query was stopped while it looked for its next answer"
 
 
 class SLRError(Exception):

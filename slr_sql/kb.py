@@ -14,6 +14,7 @@ import functools
 import inspect
 import numbers
 import os
+import threading
 import time
 from operator import itemgetter
 from pathlib import Path
@@ -22,11 +23,12 @@ from typing import Any, Callable, Iterable, Iterator
 from .answers import answer_bindings
 from .arguments import (ListenerList, check_callable, check_flag, check_option_names,
                         check_time_option)
-from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from .api import PendingQueryAPI, ProgramInfo, SolutionsAPI, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
 from .encoding import NullArgument, event_form_loop
-from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRError, SLRUnavailable
+from .errors import (STOPPED_BY_CALLER, BufferNotFound, EventRejected, NotAnEvent, SLRError,
+                     SLRUnavailable)
 from .parser import parse_event_fast, parse_indicator, parse_program, parse_term
 from .loader import ProgramLoader
 from .lockorder import held_here
@@ -41,7 +43,7 @@ from .store.connection import ChangedMeanwhile
 from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
 
-__all__ = ["KnowledgeBase", "open", "Declarations", "BufferDecl", "ProgramInfo",
+__all__ = ["KnowledgeBase", "open", "Declarations", "BufferDecl", "ProgramInfo", "Solutions",
            "check_time_option", "parse_duration"]
 
 
@@ -658,17 +660,24 @@ class KnowledgeBase:
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
                   timeout: float | None = None,
-                  robot: str | None = None) -> Iterator[dict[str, Any]]:
+                  robot: str | None = None) -> SolutionsAPI:
         """The answers of ``goal`` one at a time, as they are found (unsynchronized): what
         :meth:`query` returns, lazily. A consumer that stops early (a command line's
         ``--limit``, a shell's "stop") never pays for the rest, so a goal with endless answers
         is usable; past ``timeout`` the iteration raises :class:`SLRTimeout` after the answers
-        already yielded.
+        already yielded. The iterator is a :class:`Solutions`: ``close()`` ends it between
+        two answers, ``stop()`` from another thread ends the search for the next one.
 
         >>> from itertools import islice
         >>> list(islice(open().solutions("between(1, inf, X)"), 3))
         [{'X': 1}, {'X': 2}, {'X': 3}]
         """
+        stop = threading.Event()
+        return Solutions(self._solutions(goal, at, args, timeout, robot, stop), stop)
+
+    def _solutions(self, goal: str, at: float | None, args: dict | None,
+                   timeout: float | None, robot: str | None,
+                   stop: threading.Event) -> Iterator[dict[str, Any]]:
         check_query_options(at=at, timeout=timeout, robot=robot, args=args)
         try:
             self._refresh()
@@ -687,6 +696,7 @@ class KnowledgeBase:
         term, frame = instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout)
         m.robot = robot
+        m.stop = stop
         solving = m.solve(term)
         while True:
             try:
@@ -1286,6 +1296,50 @@ def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:
                           f"fix or delete that row")
     said = "; ".join(null_argument_text(*row) for row in rows)
     return NotAnEvent(f"{where}: {said}")
+
+
+class Solutions:
+    """The answers of one goal, one at a time (what :meth:`KnowledgeBase.solutions` returns):
+    an iterator of answer dicts, computed as they are asked for.
+
+    ``close()`` ends it between two answers (what the goal still holds is let go);
+    ``stop()``, from any thread, ends the search for an answer under way: the interpreter
+    raises :class:`SLRError` (``STOPPED_BY_CALLER``) at its next check of limits (every few
+    thousand inference steps), and a later ``next()`` raises it at once. ``slr serve``
+    stops a query so when its client asks to stop or leaves (docs/service.md, "Answers one
+    at a time"). A compiled statement is not stopped: it ends at its timeout.
+
+    >>> kb = open()
+    >>> answers = kb.solutions("between(1, inf, X)")
+    >>> next(answers)
+    {'X': 1}
+    >>> answers.stop(); next(answers)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: the query was stopped while it looked for its next answer
+    >>> kb.close()
+    """
+
+    def __init__(self, answers: Iterator[dict[str, Any]], stop: threading.Event):
+        self._answers = answers
+        self._stop = stop
+
+    def __iter__(self) -> "Solutions":
+        return self
+
+    def __next__(self) -> dict[str, Any]:
+        if self._stop.is_set():
+            raise SLRError(STOPPED_BY_CALLER)
+        return next(self._answers)
+
+    def stop(self) -> None:
+        """End the search for the next answer (see the class's text); thread-safe."""
+        self._stop.set()
+
+    def close(self) -> None:
+        """End the iteration between two answers (not while another thread is in
+        ``next()``: stop it first)."""
+        self._answers.close()
 
 
 def _boundary(method: Callable) -> Callable:

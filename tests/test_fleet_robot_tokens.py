@@ -172,7 +172,8 @@ def _operations(server) -> list[tuple[str, str]]:
 def test_a_robot_token_may_use_no_other_endpoint(served):
     """Every endpoint that needs a token but the two a pusher uses answers a robot's token
     403 Forbidden, before it reads the body or does anything; the clients raise
-    ServiceForbidden. Over WebSocket a subscription is refused with code 4403."""
+    ServiceForbidden. Over WebSocket a subscription and a query's answers one at a time are
+    refused with code 4403."""
     with slr_sql.connect(served.url, token=FULL) as kb:
         before = kb.query("aggregate_all(count, seen(_)^_, N)")
         programs = kb.programs()
@@ -208,6 +209,16 @@ def test_a_robot_token_may_use_no_other_endpoint(served):
         message = json.loads(ws.recv())
     assert message["type"] == "error" and message["error"]["kind"] == "Forbidden"
     assert ws.close_code == 4403
+    with ws_connect(served.url.replace("http", "ws") + "/solutions",
+                    additional_headers=bearer("r1")) as ws:
+        ws.send(json.dumps({"op": "solutions", "goal": "seen(X)^T"}))
+        message = json.loads(ws.recv())
+    assert message["type"] == "error" and message["error"]["kind"] == "Forbidden"
+    assert "may not use a query;" in message["error"]["message"]
+    assert ws.close_code == 4403
+    with slr_sql.connect(served.url, token=TOKENS["r1"]) as robot:
+        with pytest.raises(ServiceForbidden, match="may not use a query"):
+            next(robot.solutions("seen(X)^T"))
     with slr_sql.connect(served.url, token=FULL) as kb:
         assert kb.query("aggregate_all(count, seen(_)^_, N)") == before
         assert kb.programs() == programs

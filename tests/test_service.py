@@ -154,7 +154,7 @@ def test_health_and_openapi_describe_the_routes(server):
     expected = {"/health", "/openapi.json", "/add", "/add_event", "/add_many", "/load",
                 "/unload", "/programs", "/query", "/submit", "/submit/{handle}", "/explain",
                 "/mark_complete", "/complete_until", "/buffers", "/buffers/{buffer_id}", "/sql",
-                "/stats", "/subscribe", "/event_rules", "/unsubscribe", "/warnings",
+                "/stats", "/subscribe", "/solutions", "/event_rules", "/unsubscribe", "/warnings",
                 "/fleet/positions", "/fleet/receive", "/fleet/status"}
     assert set(spec["paths"]) == expected
     for path, methods in spec["paths"].items():

@@ -25,7 +25,7 @@ def until_queries(url: str, running: int, waiting: int) -> None:
     end = time.monotonic() + DEADLINE
     while True:
         queries = health(url)["queries"]
-        if queries == {"running": running, "waiting": waiting, "held": 0}:
+        if queries == {"running": running, "waiting": waiting, "held": 0, "solutions": 0}:
             return
         assert time.monotonic() < end, f"the server reports {queries}"
         threading.Event().wait(0.01)   # (polling another process: a deadline, not a pause)
@@ -77,7 +77,7 @@ def test_a_query_without_a_slot_within_its_time_is_answered_503_to_retry(one_slo
         assert r.json()["error"]["kind"] == "Unavailable"
         assert "max_running_queries" in r.json()["error"]["message"]
         assert int(r.headers["Retry-After"]) >= 1
-    assert health(url)["queries"] == {"running": 1, "waiting": 0, "held": 0}
+    assert health(url)["queries"] == {"running": 1, "waiting": 0, "held": 0, "solutions": 0}
     one_slot_server.kill()
     endless[0].join(DEADLINE)
 
@@ -86,7 +86,7 @@ def test_health_reports_the_limit_and_no_query_when_idle(tmp_path):
     with ServiceProcess(tmp_path / "idle.db") as server:
         h = health(server.url)
         assert h["limits"]["max_running_queries"] == 4
-        assert h["queries"] == {"running": 0, "waiting": 0, "held": 0}
+        assert h["queries"] == {"running": 0, "waiting": 0, "held": 0, "solutions": 0}
         r = HTTP.post(server.url + "/query", json={"goal": "X = 1"})
         assert r.json()["answers"] == [{"X": 1}]
-        assert health(server.url)["queries"] == {"running": 0, "waiting": 0, "held": 0}
+        assert health(server.url)["queries"] == {"running": 0, "waiting": 0, "held": 0, "solutions": 0}

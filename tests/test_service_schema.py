@@ -92,9 +92,12 @@ _ANY_JSON = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(), st.f
     max_leaves=8)
 
 
+WEBSOCKETS = ("/subscribe", "/solutions")     # (the paths of WebSockets: not HTTP)
+
+
 def _operations(spec: dict) -> list[tuple[str, str, dict]]:
     return [(path, method.upper(), op) for path, ops in spec["paths"].items()
-            for method, op in ops.items() if path != "/subscribe"]
+            for method, op in ops.items() if path not in WEBSOCKETS]
 
 
 @st.composite
@@ -236,7 +239,7 @@ def test_each_operation_without_parameters_goes_straight_to_its_endpoint(spec):
         direct = _direct_routes(app.routes)
     expected = set()
     for path, ops in spec["paths"].items():
-        if "{" not in path and path != "/subscribe":    # (a WebSocket's: not HTTP)
+        if "{" not in path and path not in WEBSOCKETS:
             expected |= {(m.upper(), path) for m in ops}
             expected |= {("HEAD", path)} if "get" in ops else set()
     assert set(direct) == expected and ("POST", "/add_many") in direct

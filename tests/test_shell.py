@@ -749,16 +749,3 @@ def test_piped_responses_next_full_answer_stop_and_a_goal_in_their_place(store):
         "X = last .",
     ]
     assert r.stderr == "error: arithmetic: division by zero\n"
-
-
-def test_piped_goal_past_the_servers_query_time_ends_in_words(tmp_path):
-    """The shell given a server's URL: `repeat.` runs into the server's time limit, which
-    the shell says in words; it goes on with the next goal."""
-    from service_helpers import ServiceProcess
-
-    with ServiceProcess(tmp_path / "robot.db", "--max-query-time", "0.5") as server:
-        r = slr("shell", server.url, stdin="repeat.\nX = 1.\n")
-    assert r.returncode == 0, r.stderr
-    assert r.stdout == "X = 1 .\n"
-    assert r.stderr.startswith("error: ") and "0.5" in r.stderr and "\n" == r.stderr[-1] \
-        and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr

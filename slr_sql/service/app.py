@@ -493,6 +493,7 @@ class _Service:
         # query) end at once instead of holding the shutdown for its whole grace
         self.stopping = asyncio.Event()
         self.requests_held = 0        # waiting for an answer: synchronized queries, polls
+        self.solutions_open = 0       # /solutions connections (a query open on each)
         self.answer_texts = _AnswerTexts()
         self.fanout: FanOut | None = None
         self.endpoints = _ENDPOINTS
@@ -584,6 +585,7 @@ class _Service:
         # an ASGI app, not a function: its delivery loop sends each frame without starlette's
         # WebSocket layers
         out.append(WebSocketRoute("/subscribe", _SubscribeEndpoint(self)))
+        out.append(WebSocketRoute("/solutions", self.solutions))
         return out
 
     def _dispatch(self, endpoints: list[_Endpoint]) -> Callable:
@@ -859,11 +861,13 @@ class _Service:
         except Exception as exc:   # the client left whatever happens here
             log_failure(log, "closing a subscription", exc)
 
-    async def _first_message(self, websocket: WebSocket) -> dict:
+    async def _first_message(self, websocket: WebSocket, op: str = "subscribe",
+                             example: str = '"pattern": ...') -> dict:
+        """The first message of a WebSocket connection: ``{"op": op, ...}``."""
         try:
             message = await asyncio.wait_for(websocket.receive(), self.limits.body_timeout)
         except asyncio.TimeoutError:
-            raise ServiceError(f"no subscribe message within {self.limits.body_timeout:g} s",
+            raise ServiceError(f"no {op} message within {self.limits.body_timeout:g} s",
                                kind="RequestTimeout") from None
         if message["type"] == "websocket.disconnect":
             raise WebSocketDisconnect(message.get("code", 1000))
@@ -873,10 +877,93 @@ class _Service:
         try:
             request = loads(data)
         except (ValueError, UnicodeDecodeError) as exc:
-            raise ServiceError(f"the subscribe message is not valid JSON: {exc}") from None
-        if type(request) is not dict or request.get("op") != "subscribe":
-            raise ServiceError('the first message must be {"op": "subscribe", "pattern": ...}')
+            raise ServiceError(f"the {op} message is not valid JSON: {exc}") from None
+        if type(request) is not dict or request.get("op") != op:
+            raise ServiceError(f'the first message must be {{"op": "{op}", {example}}}')
         return request
+
+    # -- answers one at a time over WebSocket -------------------------------------------------
+    async def solutions(self, websocket: WebSocket) -> None:
+        """``/solutions``: a goal's answers one at a time, each computed when the client asks
+        for it (docs/service.md, "Answers one at a time"): the first message asks for the
+        first answer, ``{"op": "next"}`` for each next one; ``{"op": "close"}``, or closing
+        the connection, ends the query -- also while it looks for an answer
+        (:meth:`Solutions.stop <slr_sql.kb.Solutions.stop>`), so nothing of it goes on
+        running. The query's time (its ``timeout``, capped by ``max_query_time``) counts
+        from the first message to the end, the waits for the client's next request
+        included. Each answer is computed on the thread pool holding a query slot; none is
+        computed ahead, and none while the client reads."""
+        try:
+            await websocket.accept()
+        except OSError:     # the client left during the handshake: nobody to answer
+            return
+        asks = _Asks()
+        reader: asyncio.Task | None = None
+        query: _StreamedQuery | None = None
+        self.solutions_open += 1
+        try:
+            request = await self._first_message(websocket, "solutions", '"goal": ...')
+            robot = self.check_token(
+                websocket.headers.get("authorization")
+                or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
+                    else None))
+            if robot is not None:
+                raise _robot_may_not(robot, "a query")
+            goal, options, timeout = _solutions_request(request)
+            budget = _cap(timeout, self.limits.max_query_time)
+            query = _StreamedQuery(self, goal, options, budget)
+            reader = asyncio.create_task(asks.read(websocket))
+            seq = 0
+            while True:
+                # one answer, while the client's end is watched (a stopping server closes
+                # the connection: its end too)
+                step = asyncio.ensure_future(query.next_answer())
+                ended = asyncio.ensure_future(asks.ended.wait())
+                try:
+                    await asyncio.wait({step, ended}, return_when=asyncio.FIRST_COMPLETED)
+                finally:
+                    ended.cancel()
+                if not step.done():
+                    await query.abandon(step)
+                    if asks.error is not None:
+                        raise asks.error
+                    await _close_quietly(websocket)
+                    break
+                answer = step.result()             # (the query's error is raised here)
+                if answer is _NO_MORE:
+                    await websocket.send_text('{"type":"end"}')
+                    await websocket.close(1000)
+                    break
+                seq += 1
+                await websocket.send_text(dumps({"type": "answer", "seq": seq,
+                                                 "answer": encode_answers([answer])[0]})
+                                          .decode("utf-8"))
+                try:
+                    asked = await asks.next_request(query.time_left())
+                except TimeoutError:
+                    raise SLRTimeout(f"query timed out after {budget:g} s (its time counts "
+                                     f"from the first request, the waits for the next "
+                                     f"request included; {seq} answer{'s' if seq != 1 else ''}"
+                                     f" sent)") from None
+                if not asked:
+                    if asks.error is not None:
+                        raise asks.error
+                    await _close_quietly(websocket)
+                    break
+        except WebSocketDisconnect:
+            pass                   # the client is gone: nobody to answer
+        except Exception as exc:
+            # (an OSError that is no SLRError -- SLRTimeout is a TimeoutError -- is a send
+            # to a client that is gone)
+            gone = isinstance(exc, OSError) and not isinstance(exc, SLRError)
+            if not gone and (not asks.ended.is_set() or asks.error is not None):
+                await _send_error(websocket, _classify(exc))
+        finally:
+            if reader is not None:
+                reader.cancel()
+            if query is not None:
+                await query.close()
+            self.solutions_open -= 1
 
     # -- OpenAPI ----------------------------------------------------------------------------
     def openapi(self) -> dict:
@@ -907,6 +994,14 @@ class _Service:
                        "end / error messages; with \"ack\": true send {\"op\": \"ack\", "
                        "\"seq\": N} for the answers handled (docs/service.md).",
             "operationId": "subscribe",
+            "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
+        paths["/solutions"] = {"get": {
+            "summary": "WebSocket: a goal's answers one at a time (kb.solutions); send {\"op\": "
+                       "\"solutions\", \"goal\", \"args\", \"at\", \"timeout\", \"robot\"} "
+                       "for the first answer and {\"op\": \"next\"} for each next one, "
+                       "receive answer / end / error messages; closing the WebSocket or "
+                       "{\"op\": \"close\"} ends the query (docs/service.md).",
+            "operationId": "solutions",
             "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
         return {"openapi": "3.1.0",
                 "info": {"title": "slr_sql service", "version": slr_sql.__version__,
@@ -945,7 +1040,7 @@ async def _health(svc: "_Service", request: Request) -> Any:
     return {"status": "ok", "version": slr_sql.__version__, "api": API_VERSION,
             "limits": dataclasses.asdict(svc.limits),
             "queries": {"running": svc.queries_running, "waiting": svc.queries_waiting,
-                        "held": svc.requests_held}}
+                        "held": svc.requests_held, "solutions": svc.solutions_open}}
 
 
 @_route("GET", "/openapi.json", "This API's OpenAPI 3.1 description.",
@@ -1473,6 +1568,133 @@ def _subscribe_request(request: dict) -> tuple[str, dict]:
     return pattern, kwargs
 
 
+# -- answers one at a time (WebSocket /solutions) ---------------------------------------------
+
+_NO_MORE = object()     # a query's answers are all given
+
+
+def _solutions_request(request: dict) -> tuple[str, dict, float | None]:
+    """The goal, the options of ``kb.solutions`` and the timeout asked in a ``solutions``
+    message."""
+    goal = _field(request, "goal", str, required=True)
+    options: dict[str, Any] = {"at": _number(request, "at"),
+                               "args": decode_args(request.get("args"))}
+    robot = _field(request, "robot", str)
+    if robot is not None:
+        options["robot"] = robot
+    return goal, options, _number(request, "timeout", minimum=0)
+
+
+class _StreamedQuery:
+    """One query of ``/solutions``: its answers taken one at a time on the thread pool, each
+    while holding a query slot; ``deadline`` ends the whole query (``time_left``). Used on
+    the event loop only."""
+
+    def __init__(self, service: "_Service", goal: str, options: dict, budget: float):
+        self.service = service
+        self.goal = goal
+        self.options = options
+        self.budget = budget
+        self.deadline = time.monotonic() + budget
+        self.answers: Any = None        # kb.solutions' iterator, made with the first answer
+        self.computing = False          # a thread of the pool is in next(answers)
+
+    def time_left(self) -> float:
+        return max(self.deadline - time.monotonic(), 0.0)
+
+    async def next_answer(self) -> Any:
+        """The next answer, or ``_NO_MORE``; the query's error."""
+        svc = self.service
+        async with svc.query_slot(self.time_left()) as waited:
+            if self.answers is None:
+                # its time: what is left after the first slot's wait (none when one was
+                # free: the timeout the client asked, as /query's)
+                timeout = max(self.budget - waited, 0.0)
+                self.deadline = time.monotonic() + timeout
+                self.answers = svc.kb.solutions(self.goal, timeout=timeout, **self.options)
+            self.computing = True
+            try:
+                return await svc.call(next, self.answers, _NO_MORE)
+            finally:
+                self.computing = False
+
+    async def abandon(self, step: "asyncio.Future[Any]") -> None:
+        """End ``step`` (a :meth:`next_answer` under way): the search is stopped and its
+        thread waited for (it ends at the interpreter's next check); a step still waiting
+        for its slot is cancelled."""
+        if self.answers is not None:
+            self.answers.stop()
+        if not self.computing:
+            step.cancel()
+        await asyncio.wait({step})
+        if not step.cancelled():
+            step.exception()          # (retrieved: the query's error goes nowhere now)
+
+    async def close(self) -> None:
+        answers, self.answers = self.answers, None
+        if answers is None:
+            return
+        if self.computing:            # (the connection's task was cancelled: a server's
+            answers.stop()            # grace over) its thread ends at its next check
+            return
+        try:
+            await self.service.call(answers.close)
+        except Exception as exc:  # the client has what it asked for whatever happens here
+            log_failure(log, "closing a query's answers", exc)
+
+
+class _Asks:
+    """What the client of ``/solutions`` sends after its first message: requests for the
+    next answer (``{"op": "next"}``, counted) and its end (``{"op": "close"}``, a closed
+    connection, or a message that is neither: ``error``). Used on the event loop only."""
+
+    def __init__(self) -> None:
+        self.asked = 0
+        self.ended = asyncio.Event()
+        self.error: ServiceError | None = None
+        self._changed = asyncio.Event()
+
+    async def read(self, websocket: WebSocket) -> None:
+        try:
+            while True:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                text = message.get("text")
+                if text is None:
+                    text = (message.get("bytes") or b"").decode("utf-8", "replace")
+                try:
+                    op = loads(text)
+                except (ValueError, UnicodeDecodeError):
+                    op = None
+                op = op.get("op") if type(op) is dict else None
+                if op == "next":
+                    self.asked += 1
+                    self._changed.set()
+                    continue
+                if op != "close":
+                    self.error = ServiceError(f'expected {{"op": "next"}} or {{"op": '
+                                              f'"close"}}, got {text[:100]!r}')
+                break
+        except Exception:  # noqa: BLE001 - the peer vanished
+            pass
+        finally:
+            self.ended.set()
+            self._changed.set()
+
+    async def next_request(self, timeout: float) -> bool:
+        """True once the client asked for the next answer; False when it ended;
+        TimeoutError after ``timeout`` seconds."""
+        async with asyncio.timeout(timeout):
+            while not self.asked and not self.ended.is_set():
+                self._changed.clear()
+                await self._changed.wait()
+        if self.ended.is_set():
+            return False
+        self.asked -= 1
+        return True
+
+
 # -- subscriptions ------------------------------------------------------------------------------
 
 MAX_BATCH = 1000
@@ -1552,6 +1774,14 @@ class _Acks:
             self._event.clear()
             await self._event.wait()
         return 0 if self._stopped else self.bound - (self.sent - self.acked)
+
+
+async def _close_quietly(websocket: WebSocket) -> None:
+    """Close with 1000 (the client asked to stop), unless the client closed already."""
+    try:
+        await websocket.close(1000)
+    except Exception:  # noqa: BLE001 - the client is gone already
+        pass
 
 
 async def _send_error(websocket: WebSocket, exc: BaseException) -> None:

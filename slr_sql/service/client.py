@@ -57,7 +57,8 @@ from urllib.parse import quote, urlsplit
 
 import slr_sql  # noqa: F401  (the examples' slr_sql.open and slr_sql.connect)
 from slr_sql import EventRejected, SLRError, SLRTimeout, SLRUnavailable
-from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from slr_sql.errors import STOPPED_BY_CALLER
+from slr_sql.api import PendingQueryAPI, ProgramInfo, SolutionsAPI, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
@@ -80,8 +81,8 @@ from .errors import (ServiceError, ServiceOutcomeUnknown, ServiceUnavailable, er
                      parse_retry_after)
 from .http_pool import AnswerLost, AnswerTimeout, HttpPool, RequestInvalid, RequestNotSent
 
-__all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
-           "RemoteWait"]
+__all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSolutions",
+           "RemoteSubscription", "RemoteWait"]
 
 log = logging.getLogger("slr_sql.service.client")
 
@@ -223,18 +224,19 @@ def _not_trusted(url: str, refused: "ssl.SSLCertVerificationError") -> ServiceEr
                         kind="CertificateNotTrusted", status=0)
 
 
-def _not_subscribed(url: str, exc: BaseException) -> ServiceError:
+def _not_subscribed(url: str, exc: BaseException, doing: str = "subscribe") -> ServiceError:
     """The error of a WebSocket to ``url`` that could not be opened (``exc``): a
     :class:`ServiceUnavailable` when no server answered or it answered 503, as for a request;
     another HTTP status refusing the handshake (a server that is no slr serve, a proxy) is a
-    :class:`ServiceError` with that status, which a retry would meet again.
+    :class:`ServiceError` with that status, which a retry would meet again. ``doing``: what
+    the WebSocket was for, in the message.
 
     >>> print(_not_subscribed("ws://127.0.0.1:1/subscribe", ConnectionRefusedError(111, "refused")))
     cannot subscribe at ws://127.0.0.1:1/subscribe: [Errno 111] refused
     """
     response = getattr(exc, "response", None)
     status = getattr(response, "status_code", None)
-    message = f"cannot subscribe at {url}: {exc}"
+    message = f"cannot {doing} at {url}: {exc}"
     if isinstance(status, int) and status != 503:
         return ServiceError(message, kind="BadRequest", status=status)
     headers = getattr(response, "headers", None)
@@ -806,20 +808,30 @@ class RemoteKnowledgeBase:
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
                   timeout: float | None = None,
-                  robot: str | None = None) -> Iterator[dict[str, Any]]:
-        """The answers of ``goal`` one at a time (see ``KnowledgeBase.solutions``). The server
-        answers a request as a whole, so this iterates over one :meth:`query`'s answers; a
-        goal with endless answers needs ``timeout`` (capped by the server's
-        ``max_query_time``) or ``query(..., limit=N)``.
+                  robot: str | None = None) -> SolutionsAPI:
+        """The answers of ``goal`` one at a time (see ``KnowledgeBase.solutions``), each
+        computed by the server when it is asked for (WebSocket ``/solutions``): a goal with
+        endless answers gives its first at once. ``close()`` ends the query on the server
+        (a :class:`RemoteSolutions`); its time, ``timeout`` capped by the server's
+        ``max_query_time``, counts from the first answer asked to the last, the time between
+        two ``next()`` included.
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
         >>> kb = slr_sql.connect(server.url)
         >>> for answer in kb.solutions("member(X, [a, b])"): print(answer)
         {'X': Atom('a')}
         {'X': Atom('b')}
+        >>> answers = kb.solutions("between(1, inf, X)")
+        >>> next(answers), next(answers), answers.close()
+        ({'X': 1}, {'X': 2}, None)
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args)
+        request = _goal_body(goal, at, args, timeout)
+        request["op"] = "solutions"
+        if robot is not None:
+            request["robot"] = robot
+        return RemoteSolutions(self, request)
 
     @_reads_answer
     def goal_warnings(self, goal: str) -> list[str]:
@@ -1604,6 +1616,165 @@ class RemoteSubscription:
 
     def __exit__(self, exc_type: Any, *rest: Any) -> None:
         self.close(ack=exc_type is None)
+
+
+class RemoteSolutions:
+    """The answers of a goal on the server, one at a time (what
+    :meth:`RemoteKnowledgeBase.solutions` returns): the first ``next()`` opens a WebSocket to
+    ``/solutions`` and sends the goal, each later one sends ``{"op": "next"}``; the server
+    computes one answer per request, none ahead. ``close()`` closes the WebSocket, which ends
+    the query on the server, also while it looks for an answer; so does the end of the
+    answers, an error, or an interrupted ``next()`` (Ctrl-C). A server without
+    ``/solutions`` (an older ``slr serve``) is asked with one :meth:`~RemoteKnowledgeBase.query`
+    instead, whose answers come all at once.
+
+    >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+    >>> kb = slr_sql.connect(server.url)
+    >>> answers = kb.solutions("member(X, [1, 2]), Y is 1 / (2 - X)")
+    >>> next(answers)
+    {'X': 1, 'Y': 1}
+    >>> next(answers)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLREvaluationError: error(evaluation_error(zero_divisor),context((/)/2,_))
+    >>> list(answers), answers.closed
+    ([], True)
+    >>> kb.close(); server.stop(); server.kb.close()
+    """
+
+    def __init__(self, client: RemoteKnowledgeBase, request: dict):
+        self._client = client
+        self._request = request
+        self._ws: Any = None
+        self._answers: Iterator[dict[str, Any]] | None = None   # an older server's
+        self.closed = False
+        self._stopped = False
+        from websockets.exceptions import WebSocketException   # (the service extra's)
+        self._closed_exc: type[Exception] = WebSocketException
+
+    def __iter__(self) -> "RemoteSolutions":
+        return self
+
+    def __next__(self) -> dict[str, Any]:
+        if self._stopped:
+            raise SLRError(STOPPED_BY_CALLER)
+        if self.closed:
+            raise StopIteration
+        if self._client.closed:
+            raise SLRError("the connection to the knowledge base is closed")
+        if self._answers is not None:
+            return next(self._answers)
+        try:
+            if self._ws is None:
+                if not self._open():
+                    return next(self)
+            else:
+                try:
+                    self._ws.send('{"op":"next"}')
+                except self._closed_exc:
+                    pass   # the server ended the query (its time ran out): its last word says why
+            return self._receive()
+        except BaseException:
+            self.close()   # (an error, Ctrl-C: the query ends on the server too)
+            raise
+
+    def _open(self) -> bool:
+        """Connect and send the goal; False when the server has no ``/solutions``."""
+        from websockets.exceptions import InvalidStatus, WebSocketException
+        from websockets.sync.client import connect as ws_connect
+
+        client = self._client
+        url = "ws" + client.url[len("http"):] + "/solutions"
+        headers = {"Authorization": client._headers["Authorization"]} \
+            if "Authorization" in client._headers else None
+        try:
+            self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
+                                  max_size=None, ssl=client._tls, proxy=None).__enter__()
+            self._ws.send(dumps(self._request).decode("utf-8"))
+        except InvalidStatus as exc:
+            if exc.response.status_code not in (403, 404):   # no such WebSocket route
+                raise _not_subscribed(url, exc, "ask") from None
+            body = {k: v for k, v in self._request.items() if k != "op"}
+            self._answers = iter(decode_answers(_expect(client._post(
+                "/query", body, timeout=client._read_timeout(body.get("timeout"))),
+                "answers", list)))
+            return False
+        except (OSError, WebSocketException) as exc:
+            refused = _refused_certificate(exc)
+            if refused is not None:
+                raise _not_trusted(client.url, refused) from None
+            if isinstance(exc, OSError):   # no server answered: as for a request
+                raise ServiceUnavailable(f"cannot reach slr serve at {client.url}: {exc}",
+                                         status=0) from None
+            raise _not_subscribed(url, exc, "ask") from None
+        return True
+
+    def _receive(self) -> dict[str, Any]:
+        from websockets.exceptions import WebSocketException
+
+        wait = self._client._read_timeout(self._request.get("timeout"))
+        try:
+            data = self._ws.recv(wait)
+        except TimeoutError:
+            raise ServiceUnavailable(f"the server sent no answer within {wait:g} s",
+                                     status=0) from None
+        except WebSocketException as exc:
+            if self._stopped:
+                raise SLRError(STOPPED_BY_CALLER) from None
+            raise ServiceUnavailable(f"the query's connection closed: {exc}",
+                                     status=0) from None
+        try:
+            message = loads(data)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ServiceError(f"the server sent a message that is not JSON ({exc}): is the "
+                               "URL that of an slr serve?", kind="InternalError",
+                               status=0) from None
+        kind = message.get("type") if isinstance(message, dict) else None
+        if kind == "answer":
+            return decode_answers([message.get("answer", {})])[0]
+        if kind == "end":
+            self.close()
+            raise StopIteration
+        if kind == "error":
+            raise error_from_body(message, int(message.get("error", {}).get("status", 400)))
+        raise ServiceError(f"unexpected message from the server: {str(message)[:200]}",
+                           kind="InternalError", status=0)
+
+    def stop(self) -> None:
+        """End the query from another thread, also while a ``next()`` waits for the server
+        to find an answer: the connection closes (the server stops its search), and that
+        ``next()`` and the later ones raise SLRError, as a local ``Solutions.stop()``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); answers = kb.solutions("repeat")
+        >>> next(answers), answers.stop()
+        ({}, None)
+        >>> next(answers)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: the query was stopped while it looked for its next answer
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        self._stopped = True
+        self.close()
+
+    def close(self) -> None:
+        """End the query (on the server too); later ``next()`` calls end the iteration.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); answers = kb.solutions("between(1, inf, X)")
+        >>> next(answers), answers.close(), list(answers)
+        ({'X': 1}, None, [])
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        self.closed = True
+        self._answers = None
+        ws, self._ws = self._ws, None
+        if ws is not None:
+            try:
+                ws.close()
+            except Exception:  # noqa: BLE001 - the connection is gone already
+                pass
 
 
 # -- request bodies ----------------------------------------------------------------------------
