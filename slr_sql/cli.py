@@ -863,14 +863,13 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
                     _err(f"% {line}")
             for answer in answers[:limit]:
                 printer(answer)
-        elif not hasattr(kb, "solutions"):   # a service URL: the server applies the limit
-            for answer in kb.query(goal, at=at, timeout=timeout, limit=limit,
-                                   **({"robot": robot} if robot is not None else {})):
-                printer(answer)
         elif limit != 0:
+            # (answers one at a time, local or served: the search, here or on the server,
+            # ends at the limit's last answer instead of running on)
+            solutions = kb.solutions(goal, at=at, timeout=timeout,
+                                     **({"robot": robot} if robot is not None else {}))
             try:
-                for answer in kb.solutions(goal, at=at, timeout=timeout,
-                                        **({"robot": robot} if robot is not None else {})):
+                for answer in solutions:
                     printer(answer)
                     if printer.count == limit:
                         break
@@ -879,6 +878,8 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
                      + (f" ({printer.count} answer{'s' if printer.count != 1 else ''} "
                         f"printed before it)" if printer.count else ""))
                 sys.exit(1)
+            finally:
+                solutions.close()
     printer.finish()
 
 
