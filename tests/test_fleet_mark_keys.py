@@ -125,7 +125,7 @@ def as_version_13(where: str) -> None:
 
 def keys(where: str) -> dict:
     with slr_sql.open(where, clock=slr_sql.ManualClock(0)) as kb:
-        assert kb.store.schema_version() == migration_scripts()[-1][0] == 14
+        assert kb.store.schema_version() == migration_scripts()[-1][0] == 15
         return kb.store.meta_items("fleet/mark/")
 
 

@@ -77,7 +77,7 @@ def test_a_version_12_store_is_migrated_and_then_takes_long_keys(tmp_path, postg
     assert "(arg2, t_end, t_start)" in old["slr_cep_ix__b__arg2_end"]
 
     with slr_sql.open(postgres_url, clock=ManualClock(10.0)) as kb:   # (migrates)
-        assert kb.store.schema_version() == migration_scripts()[-1][0] == 14
+        assert kb.store.schema_version() == migration_scripts()[-1][0] == 15
         # what was stored answers as before
         assert kb.query("e(X, N)^T") == [{"X": "cup", "N": 1, "T": 1.0}]
         assert [a["S"] for a in kb.query("c(X)^[S, E]")] == [1.0]

@@ -418,6 +418,18 @@ class EventStore:
     def fleet_contacts(self) -> list[dict[str, Any]]:
         return self._fleet.contacts()
 
+    @_doc(Fleet.retired)
+    def fleet_retired(self, hold: str | None = None) -> dict[str, float]:
+        return self._fleet.retired(hold)
+
+    @_doc(Fleet.retire)
+    def fleet_retire(self, robot: str, at: float) -> bool:
+        return self._fleet.retire(robot, at)
+
+    @_doc(Fleet.reinstate)
+    def fleet_reinstate(self, robot: str) -> bool:
+        return self._fleet.reinstate(robot)
+
     # ------------------------------------------------------------------ event types
 
     @_doc(EventTables.declare_type)

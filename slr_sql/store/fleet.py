@@ -47,6 +47,11 @@ _ADD_ROUTE = ("INSERT INTO slr_fleet_routes (robot, via, shipped) VALUES (?, ?, 
               "ON CONFLICT (robot) DO UPDATE SET shipped = slr_fleet_routes.shipped + "
               "excluded.shipped")
 _TAKE_ROUTE = _ADD_ROUTE + " RETURNING via"
+# the advisory lock of the retirements on a server (b"slr_reti": apart from the others'
+# keys): a shipment holds it shared from its start, a retirement exclusively, so that a
+# shipment that read no retirement of its robot commits before a retirement of it reads
+# the marks, and one after it reads the retirement (on SQLite one writer at a time does it)
+_RETIRE_LOCK = int.from_bytes(b"slr_reti", "big")
 
 
 def check_robot_name(name: Any) -> str:
@@ -136,7 +141,7 @@ class ShipmentConflict(SLRError):
 class Fleet:
     """The robot name of a store and the shipping tables (``slr_robots``,
     ``slr_fleet_positions``, ``slr_fleet_robots``, migration 0006; ``slr_fleet_routes``,
-    migration 0010).
+    migration 0010; ``slr_fleet_retired``, migration 0015).
 
     >>> from slr_sql.store import EventStore
     >>> s = EventStore(None, robot="r1"); s.robot, s.robots()
@@ -533,11 +538,45 @@ class Fleet:
                 "slr_fleet_robots.head_arrival), contact_at = excluded.contact_at",
                 (robot, pending, head_arrival, time.time()))
 
+    def retired(self, hold: str | None = None) -> dict[str, float]:
+        """The robots retired from this fleet store (``slr fleet retire``), each with the
+        time of its retirement (seconds since the epoch). ``hold``, inside a transaction:
+        ``"shared"`` (a shipment) or ``"exclusive"`` (a retirement or reinstatement) takes
+        the retirements' lock on a server first, until the transaction ends.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.fleet_retire("r1", 100.0), s.fleet_retired()
+        (True, {'r1': 100.0})
+        """
+        if hold is not None and self.db.dialect.name != "sqlite":
+            take = "pg_advisory_xact_lock_shared" if hold == "shared" else "pg_advisory_xact_lock"
+            conn = self.db.conn
+            # (sent with the read below, in its round trip: a statement of its own before
+            # it, so the read's snapshot is taken once the lock is held)
+            conn.execute_unanswered(f"SELECT {take}(?)", (_RETIRE_LOCK,))
+        return {robot: float(at) for robot, at in self.db.execute(
+            "SELECT robot, retired_at FROM slr_fleet_retired")}
+
+    def retire(self, robot: str, at: float) -> bool:
+        """Note ``robot`` retired at ``at`` (seconds since the epoch); False when it was
+        retired already (its first time kept)."""
+        with self.db.transaction():
+            return bool(self.db.execute(
+                "INSERT INTO slr_fleet_retired (robot, retired_at) VALUES (?, ?) "
+                "ON CONFLICT (robot) DO NOTHING RETURNING 1", (robot, float(at))))
+
+    def reinstate(self, robot: str) -> bool:
+        """Forget the retirement of ``robot``; False when it was not retired."""
+        with self.db.transaction():
+            return bool(self.db.execute(
+                "DELETE FROM slr_fleet_retired WHERE robot = ? RETURNING 1", (robot,)))
+
     def contacts(self) -> list[dict[str, Any]]:
         """Per robot that shipped: its ``slr_fleet_robots`` row as a dict, and per robot whose
         rows another store relays here (``slr_fleet_routes``): the rows stored of it, no
         contact; ``via`` is the relaying store's robot (None for a robot shipping here
-        itself); in name order."""
+        itself); ``retired_at`` the time it was retired (``slr fleet retire``), else None;
+        in name order."""
         with self.db.lock:
             self.db.check_open()
             cols = ["robot", "shipped", "last_arrival", "pending", "head_arrival", "contact_at"]
@@ -552,6 +591,14 @@ class Fleet:
                 rows[who] = {"robot": who, "shipped": shipped, "last_arrival": None,
                              "pending": None, "head_arrival": None, "contact_at": None,
                              "via": via}
+            for row in rows.values():
+                row["retired_at"] = None
+            for who, at in self.retired().items():
+                if who not in rows:   # (a robot known by its events alone: listed too)
+                    rows[who] = {"robot": who, "shipped": 0, "last_arrival": None,
+                                 "pending": None, "head_arrival": None, "contact_at": None,
+                                 "via": None}
+                rows[who]["retired_at"] = at
             return [rows[who] for who in sorted(rows)]
 
 
