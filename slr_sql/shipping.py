@@ -237,11 +237,15 @@ def retire(kb: Host, robot: str) -> dict[str, Any]:
             now = store.meta_get(f"sync/mark/{mk}")
             if now is not None and now != before[mk]:
                 raised[mk] = float(now)
-    if raised:
-        # (synchronized queries waiting on this knowledge base: the marks moved under them,
-        # on its own connection, which its change check does not see)
-        for listener in kb.progress_listeners:
-            listener()
+        if raised:
+            # synchronized queries waiting on this knowledge base: the marks moved under
+            # them on its own connection, which its change check does not see. Once
+            # committed (inside a caller's transaction the store's lock is held, and the
+            # synchronizer's lock comes before it)
+            def tell() -> None:
+                for listener in kb.progress_listeners:
+                    listener()
+            store.after_commit(tell)
     return {"robot": robot, "retired_at": at, "already": False, "raised": raised}
 
 

@@ -17,6 +17,8 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import threading
+import time
 
 import pytest
 from service_helpers import HTTP, ServiceProcess, slr_env
@@ -133,6 +135,41 @@ def test_a_retired_robot_ships_nothing_until_reinstated(where):
         assert receive(kb, "site", [("seen", 1, [row(2, "d", 4.0)])]) == 1
         reinstate(kb, "r2")
         assert receive(kb, "r2", [("seen", 1, [row(2, "late", 4.0)])], pending=0) == 1
+
+
+def test_a_shipment_waits_for_a_retirement_of_its_robot_in_flight(postgres_url):
+    """Two connections of a PostgreSQL fleet store: a shipment of r2 that starts while a
+    retirement of r2 has not committed waits for it, then is refused -- it must not store
+    r2's rows behind marks the retirement raised past them (on SQLite one writer at a time
+    does the same)."""
+    import psycopg
+
+    clock = slr_sql.ManualClock(1000)
+    with slr_sql.open(postgres_url, clock=clock) as shipping, \
+            slr_sql.open(postgres_url, clock=clock) as operator:
+        receive(shipping, "r2", [("seen", 1, [row(1, "b", 2.0)])], {"seen/1": 5.0}, pending=0)
+        receive(shipping, "r1", [("seen", 1, [row(1, "a", 1.0)])], {"seen/1": 20.0}, pending=0)
+        outcome: list = []
+
+        def ship() -> None:
+            try:
+                outcome.append(receive(shipping, "r2", [("seen", 1, [row(2, "late", 3.0)])]))
+            except slr_sql.SLRError as exc:
+                outcome.append(exc)
+        shipper = threading.Thread(target=ship)
+        with operator.store.transaction():
+            assert retire(operator, "r2")["raised"] == {"seen/1": 20.0}
+            shipper.start()
+            deadline = time.monotonic() + DEADLINE
+            with psycopg.connect(postgres_url, autocommit=True) as watch:
+                # (until the shipment waits for a lock, or is done: each look a round trip)
+                while shipper.is_alive() and not watch.execute(
+                        "SELECT count(*) FROM pg_locks WHERE NOT granted AND locktype = "
+                        "'advisory'").fetchone()[0]:
+                    assert time.monotonic() < deadline, "the shipment neither waited nor ended"
+        shipper.join(DEADLINE)
+        assert len(outcome) == 1 and isinstance(outcome[0], RobotRetired), outcome
+        assert shipping.query("seen(X)^T", robot="r2") == [{"X": "b", "T": 2.0}]
 
 
 def test_retire_refuses_what_is_no_robot_of_the_fleet(where, tmp_path):
