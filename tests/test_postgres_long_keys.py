@@ -52,6 +52,7 @@ def as_version_12(url: str) -> None:
                     conn.execute(re.sub(r" WHERE .*", "", definition))
         conn.execute(_VERSION_12_CATALOG)
         conn.execute("DROP FUNCTION slr_key(text)")
+        conn.execute("DROP TABLE slr_fleet_retired")   # (version 15's)
         conn.execute("DELETE FROM slr_migrations WHERE number >= 13")
 
 
