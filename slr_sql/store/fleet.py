@@ -549,11 +549,10 @@ class Fleet:
         (True, {'r1': 100.0})
         """
         if hold is not None and self.db.dialect.name != "sqlite":
-            take = "pg_advisory_xact_lock_shared" if hold == "shared" else "pg_advisory_xact_lock"
-            conn = self.db.conn
-            # (sent with the read below, in its round trip: a statement of its own before
-            # it, so the read's snapshot is taken once the lock is held)
-            conn.execute_unanswered(f"SELECT {take}(?)", (_RETIRE_LOCK,))
+            # (sent with the read below, in its round trip -- with the transaction's BEGIN
+            # when it is still pending: a statement of its own before it, so the read's
+            # snapshot is taken once the lock is held)
+            self.db.conn.lock_later(_RETIRE_LOCK, shared=hold == "shared")
         return {robot: float(at) for robot, at in self.db.execute(
             "SELECT robot, retired_at FROM slr_fleet_retired")}
 
