@@ -172,6 +172,24 @@ def test_a_shipment_waits_for_a_retirement_of_its_robot_in_flight(postgres_url):
         assert shipping.query("seen(X)^T", robot="r2") == [{"X": "b", "T": 2.0}]
 
 
+def test_a_robot_known_by_its_events_alone_is_listed_once_retired(tmp_path):
+    """A robot the fleet store holds events of without a contact row (a store upgraded from
+    before contacts were kept, or edited by hand) can be retired, and is listed so."""
+    import sqlite3
+
+    where = str(tmp_path / "fleet.db")
+    with slr_sql.open(where, clock=slr_sql.ManualClock(1000)) as kb:
+        receive(kb, "r1", [("seen", 1, [row(1, "a", 1.0)])], {"seen/1": 20.0}, pending=0)
+    conn = sqlite3.connect(where, isolation_level=None)
+    conn.execute("INSERT INTO slr_robots (name) VALUES ('old')")
+    conn.close()
+    with slr_sql.open(where, clock=slr_sql.ManualClock(1000)) as kb:
+        assert "old" not in {r["robot"] for r in kb.store.fleet_contacts()}
+        at = retire(kb, "old")["retired_at"]
+        assert [(r["robot"], r["retired_at"]) for r in kb.store.fleet_contacts()] == [
+            ("old", at), ("r1", None)]
+
+
 def test_retire_refuses_what_is_no_robot_of_the_fleet(where, tmp_path):
     named = str(tmp_path / "site.db")
     with slr_sql.open(where, clock=slr_sql.ManualClock(1000)) as kb:
@@ -196,9 +214,12 @@ def test_the_command_line_retires_shows_and_reinstates(tmp_path):
     refused (exit 1, --follow too, in words), the errors without a traceback, reinstate."""
     r1 = robot_store(tmp_path / "r1.db", "r1", 20.0, ("seen(a)^1",))
     r2 = robot_store(tmp_path / "r2.db", "r2", 5.0, ("seen(b)^2",))
+    r3 = robot_store(tmp_path / "r3.db", "r3", 30.0, ("seen(c)^3",))
     fleet_db = str(tmp_path / "fleet.db")
     fleet.push(r2, fleet_db)
     fleet.push(r1, fleet_db)
+    fleet.push(r3, str(tmp_path / "site.db"))
+    fleet.push(str(tmp_path / "site.db"), fleet_db, robot="site")   # (relays r3)
     done = slr("fleet", "retire", fleet_db, "r2")
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("robot r2 retired (")
@@ -210,6 +231,15 @@ def test_the_command_line_retires_shows_and_reinstates(tmp_path):
     lines = {line.split()[0]: line for line in text.stdout.splitlines()[1:]}
     assert "retired 20" in lines["r2"] and lines["r2"].rstrip().endswith(" UTC")
     assert "retired" not in lines["r1"]
+    assert slr("fleet", "retire", fleet_db, "r3").returncode == 0
+    lines = {line.split()[0]: line for line in slr("fleet", "status", fleet_db).stdout.splitlines()}
+    assert lines["r3"].rstrip().endswith(" UTC, relayed via site") and "retired 20" in lines["r3"]
+    assert fleet.push(str(tmp_path / "site.db"), fleet_db).shipped == 0   # (r3's marks: kept)
+    with slr_sql.open(r3, clock=slr_sql.ManualClock(1000)) as kb:
+        kb.add("seen(d)^4")
+    fleet.push(r3, str(tmp_path / "site.db"))
+    refused(slr("fleet", "push", str(tmp_path / "site.db"), fleet_db),
+            "robot 'r3' was retired from this fleet store")
     rows = {r["robot"]: r for r in json.loads(slr("fleet", "status", fleet_db, "--json").stdout)}
     assert rows["r1"]["retired_at"] is None and isinstance(rows["r2"]["retired_at"], float)
     refused(slr("fleet", "push", r2, fleet_db), "robot 'r2' was retired from this fleet store")
