@@ -762,8 +762,15 @@ class RemoteKnowledgeBase:
     @_reads_answer
     def fleet_reinstate(self, robot: str) -> dict[str, Any]:
         """Take back the retirement of ``robot`` on the server's fleet store (see
-        :func:`slr_sql.shipping.reinstate`; the server's own token only); the example is
-        :meth:`fleet_retire`'s."""
+        :func:`slr_sql.shipping.reinstate`; the server's own token only).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.fleet_receive("r1", [], {"seen/1": 5.0}, pending=0)
+        0
+        >>> kb.fleet_reinstate("r1")      # (not retired: nothing changes)
+        {'robot': 'r1', 'reinstated': False}
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         reply = self._post("/fleet/reinstate", {"robot": robot})
         return {"robot": _expect(reply, "robot", str),
                 "reinstated": _expect(reply, "reinstated", bool)}
