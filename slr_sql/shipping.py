@@ -142,12 +142,19 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             cep.after_add(token)
             return errors
     stored = 0
+    retired: dict[str, float] = {}
+
+    def take_retired(held: dict[str, float]) -> None:
+        retired.update(held)
+        if held:
+            _refuse_retired(robot, batches, held)
+    # the retirements are read first, their lock held shared to the commit: a retirement
+    # of a robot of this shipment waits for it, or it for the retirement. With the first
+    # batch's position when that is the first read (one statement, no round trip more)
+    first = None if after else next((i for i, b in enumerate(batches) if b[2]), None)
     with store.transaction():
-        # (first: a retirement of a robot of this shipment waits for its commit, or the
-        # shipment for the retirement's)
-        retired = store.fleet_retired(hold="shared")
-        if retired:
-            _refuse_retired(robot, batches, retired)
+        if first is None:
+            take_retired(store.fleet_retired(hold="shared"))
         if after:
             held = store.fleet_positions(robot)
             for name, arity, position in after:
@@ -156,13 +163,14 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
                         f"the fleet store holds {name}/{arity} of robot {robot!r} up to seq "
                         f"{held.get((name, arity), 0)}, not {position} as it did: it was "
                         "restored or replaced; shipping again from what it holds")
-        for batch in batches:
+        for i, batch in enumerate(batches):
             name, arity, rows = batch[:3]
             if rows and type(rows[0]) is not tuple:
                 rows = [tuple(r) for r in rows]
             columns = batch[3] if len(batch) > 3 else None   # (from prepare)
             stored += store.fleet_receive(robot, name, arity, rows, store_events, columns,
-                                          (name, arity) in again)
+                                          (name, arity) in again,
+                                          take_retired if i == first else None)
         if marks or relayed:
             given = {robot: marks or {}, **{r: m for r, m in (relayed or {}).items()
                                             if r != robot}}

@@ -407,8 +407,9 @@ class EventStore:
     @_doc(Fleet.receive)
     def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple],
                       store_events: Any = None, columns: list[tuple] | None = None,
-                      resync: bool = False) -> int:
-        return self._fleet.receive(robot, name, arity, rows, store_events, columns, resync)
+                      resync: bool = False, take_retired: Any = None) -> int:
+        return self._fleet.receive(robot, name, arity, rows, store_events, columns, resync,
+                                   take_retired)
 
     @_doc(Fleet.record_contact)
     def fleet_record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:

@@ -319,7 +319,7 @@ class Fleet:
 
     def receive(self, robot: str, name: str, arity: int, rows: list[tuple],
                 store_events: Any = None, columns: list[tuple] | None = None,
-                resync: bool = False) -> int:
+                resync: bool = False, take_retired: Any = None) -> int:
         """Store a shipped batch of ``robot`` (rows as :meth:`read_after` gives them, one
         type, in sequence order) exactly once: the rows after the robot's position for the
         type go in and the position moves to the last row's sequence, in one transaction
@@ -333,6 +333,9 @@ class Fleet:
         holds an identical one of the robot (same arguments, start, end and robot), and
         the position becomes the batch's last sequence, lower than before as it may be
         (0 for a resync batch without rows: the robot holds none of the type).
+        ``take_retired``: called with :meth:`retired` (its lock held shared) before anything
+        is stored, read with the robot's position in one statement (the first batch of a
+        shipment: the retirements are read without a round trip of their own).
         Returns the number of rows stored."""
         robot = check_robot_name(robot)
         if not rows:
@@ -342,8 +345,17 @@ class Fleet:
             return 0
         with self.db.transaction():
             conn = self.db.conn   # (a server's connection: its own statements, below)
-            held_at = self.db.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? "
-                                      "AND type_name = ? AND type_arity = ?", (robot, name, arity))
+            held = "SELECT position FROM slr_fleet_positions WHERE robot = ? AND type_name = ? " \
+                "AND type_arity = ?"
+            if take_retired is None:
+                held_at = self.db.execute(held, (robot, name, arity))
+            else:
+                self._hold_retirements("shared")
+                both = self.db.execute("SELECT robot, retired_at, NULL FROM slr_fleet_retired "
+                                       f"UNION ALL SELECT NULL, NULL, position FROM ({held}) AS p",
+                                       (robot, name, arity))
+                held_at = [(r[2],) for r in both if r[0] is None]
+                take_retired({r[0]: float(r[1]) for r in both if r[0] is not None})
             position = held_at[0][0] if held_at else 0
             # (sequences ascend: what the fleet holds already is a head of the batch)
             if resync:
@@ -548,13 +560,19 @@ class Fleet:
         >>> s = EventStore(None); s.fleet_retire("r1", 100.0), s.fleet_retired()
         (True, {'r1': 100.0})
         """
-        if hold is not None and self.db.dialect.name != "sqlite":
-            # (sent with the read below, in its round trip -- with the transaction's BEGIN
-            # when it is still pending: a statement of its own before it, so the read's
-            # snapshot is taken once the lock is held)
-            self.db.conn.lock_later(_RETIRE_LOCK, shared=hold == "shared")
+        if hold is not None:
+            self._hold_retirements(hold)
         return {robot: float(at) for robot, at in self.db.execute(
             "SELECT robot, retired_at FROM slr_fleet_retired")}
+
+    def _hold_retirements(self, hold: str) -> None:
+        """On a server, the retirements' lock (``"shared"`` or ``"exclusive"``) until the
+        transaction ends, taken before the next statement."""
+        if self.db.dialect.name != "sqlite":
+            # (sent with the next statement, in its round trip -- with the transaction's
+            # BEGIN when it is still pending: a statement of its own before it, so that
+            # statement's snapshot is taken once the lock is held)
+            self.db.conn.lock_later(_RETIRE_LOCK, shared=hold == "shared")
 
     def retire(self, robot: str, at: float) -> bool:
         """Note ``robot`` retired at ``at`` (seconds since the epoch); False when it was
