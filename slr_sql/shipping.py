@@ -10,6 +10,10 @@ by the ``/fleet/*`` endpoints of ``slr serve``.
 Event rules loaded on the fleet store run over the shipped events in that transaction (their
 complex events have the fleet store's robot: NULL on an unnamed fleet store); without event
 rules the rows go in as they are stored on the robot (no decoding).
+
+A robot taken out of service is retired from the fleet store (:func:`retire`, ``slr fleet
+retire``): the fleet's marks stop waiting for it, and its shipments are refused until
+:func:`reinstate`.
 """
 from __future__ import annotations
 
@@ -105,7 +109,9 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     complete up to t when each robot's is). The robots it knows are those it holds rows or
     marks of and those whose last contact said events wait on them (``pending`` above 0); a
     contact alone makes no robot one the mark waits for. The store's own name is not among
-    them: its own events are complete as far as its own marks say.
+    them: its own events are complete as far as its own marks say; nor are the robots
+    retired from the store (:func:`retire`), whose shipments, and rows of them relayed, are
+    refused with :class:`RobotRetired`.
 
     >>> import slr_sql
     >>> fleet = slr_sql.open()
