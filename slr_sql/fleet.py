@@ -1,6 +1,7 @@
 """Fleets: a robot ships its events, complex events and completeness marks to a fleet store
 (``slr fleet push``), and the fleet store says what it holds of each robot
-(``slr fleet status``). See docs/fleet.md.
+(``slr fleet status``); a robot taken out of service is retired from the fleet store (``slr
+fleet retire``), so that the fleet's marks stop waiting for it. See docs/fleet.md.
 
 Shipping is append-only and exactly once: the pusher asks the fleet store for the robot's
 positions (per event type, the last sequence of the robot's store it holds), reads the rows
@@ -33,7 +34,7 @@ from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store
     shown_location
 
 __all__ = ["FleetRefused", "FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
-           "push", "status"]
+           "push", "reinstate", "retire", "status"]
 
 BATCH = 5000                 # rows per batch (one fleet transaction)
 MAX_BATCH = 2 ** 31 - 1      # (a count SQLite's LIMIT and every backend take)
@@ -796,14 +797,70 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
                     "pending": None if unknown else r["pending"],
                     "lag_seconds": lag, "last_contact": r["contact_at"],
                     "since_contact": None if r["contact_at"] is None
-                    else max(0.0, now - r["contact_at"]), "via": via})
+                    else max(0.0, now - r["contact_at"]), "via": via,
+                    "retired_at": r.get("retired_at")})
     return out
+
+
+def _on_fleet_store(fleet: str, token: str | None, local: Callable[[Any], _T],
+                    remote: Callable[[Any], _T]) -> _T:
+    """``remote(client)`` when ``fleet`` is the URL of `slr serve`, else ``local(kb)`` on the
+    fleet store opened here (a path that holds no store is refused, not created)."""
+    if fleet.startswith(("http://", "https://")):
+        from .service.client import connect
+        with connect(fleet, token=token) as client:
+            return remote(client)
+    refuse_no_store(fleet)
+    from .kb import KnowledgeBase
+    with KnowledgeBase(fleet) as kb:
+        return local(kb)
+
+
+def retire(fleet: str, robot: str, token: str | None = None) -> dict[str, Any]:
+    """Retire ``robot`` from the fleet store ``fleet`` (a store path, a database URL, or the
+    URL of `slr serve`, where ``token`` must be the server's own): the fleet's marks stop
+    waiting for it and may rise (never fall), its events stay, and shipments of it are
+    refused until :func:`reinstate` (see :func:`slr_sql.shipping.retire`). Returns
+    ``{"robot", "retired_at", "already", "raised"}``.
+
+    >>> import os, tempfile, slr_sql
+    >>> folder = tempfile.mkdtemp()
+    >>> with slr_sql.open(os.path.join(folder, "r1.db"), robot="r1",
+    ...                   clock=slr_sql.ManualClock(0)) as kb:
+    ...     kb.add("seen(pallet7, dock)^10")
+    >>> push(os.path.join(folder, "r1.db"), os.path.join(folder, "fleet.db")).shipped
+    1
+    >>> retire(os.path.join(folder, "fleet.db"), "r1")["already"]
+    False
+    >>> [r["retired_at"] is not None for r in status(os.path.join(folder, "fleet.db"))]
+    [True]
+    """
+    from . import shipping
+    return _on_fleet_store(fleet, token, lambda kb: shipping.retire(kb, robot),
+                           lambda client: client.fleet_retire(robot))
+
+
+def reinstate(fleet: str, robot: str, token: str | None = None) -> dict[str, Any]:
+    """Take back the retirement of ``robot`` on the fleet store ``fleet`` (as :func:`retire`
+    takes it): it ships again and the fleet's marks wait for it again, from where they are.
+    Returns ``{"robot", "reinstated"}`` (False: it was not retired).
+
+    >>> import os, tempfile; fleet = os.path.join(tempfile.mkdtemp(), "f.db")
+    >>> reinstate(fleet, "r1")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: no such store: ...f.db
+    """
+    from . import shipping
+    return _on_fleet_store(fleet, token, lambda kb: shipping.reinstate(kb, robot),
+                           lambda client: client.fleet_reinstate(robot))
 
 
 # -- the command line: `slr fleet push`, `slr fleet status` (registered by slr_sql.cli) --------
 
 def click_group() -> Any:
-    """The ``slr fleet`` command group (``name``, ``push``, ``status``), built on use so
+    """The ``slr fleet`` command group (``name``, ``push``, ``status``, ``retire``,
+    ``reinstate``), built on use so
     that importing this module does not import click.
 
     >>> click_group().name
@@ -895,6 +952,11 @@ def click_group() -> Any:
         table = [header] + [
             # (names checked when they came in; a fleet file edited by hand may hold others)
             (printable_name(r["robot"]), str(r["shipped"]), "-", "-",
+             "retired " + time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["retired_at"]))
+             + " UTC" + (f", relayed via {printable_name(r['via'])}"
+                         if r.get("via") is not None else ""))
+            if r.get("retired_at") is not None else
+            (printable_name(r["robot"]), str(r["shipped"]), "-", "-",
              f"relayed via {printable_name(r['via'])}")
             if r.get("via") is not None else
             (printable_name(r["robot"]), str(r["shipped"]),
@@ -907,5 +969,36 @@ def click_group() -> Any:
         widths = [max(len(row[i]) for row in table) for i in range(len(header))]
         for row in table:
             click.echo("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
+
+    @fleet_group.command("retire")
+    @click.argument("fleet")
+    @click.argument("robot")
+    @click.pass_context
+    def retire_command(ctx: click.Context, fleet: str, robot: str) -> None:
+        """Retire ROBOT from the fleet store FLEET (a robot scrapped or renamed): the fleet's
+        marks stop waiting for it and may rise; its events stay; its shipments are refused
+        until `slr fleet reinstate`. Over `slr serve`, with the server's own token."""
+        done = retire(fleet, robot, token=token_of(ctx))
+        when = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(done["retired_at"]))
+        name = printable_name(done["robot"])
+        if done["already"]:
+            click.echo(f"robot {name} was retired already ({when} UTC); nothing changed")
+            return
+        raised = ", ".join(f"{printable_name(mk)} to {t:g}"
+                           for mk, t in sorted(done["raised"].items()))
+        click.echo(f"robot {name} retired ({when} UTC); the fleet's marks "
+                   + (f"rose: {raised}" if raised else "did not move"))
+
+    @fleet_group.command("reinstate")
+    @click.argument("fleet")
+    @click.argument("robot")
+    @click.pass_context
+    def reinstate_command(ctx: click.Context, fleet: str, robot: str) -> None:
+        """Take back the retirement of ROBOT on FLEET: it ships again, and the fleet's marks
+        wait for it again (from where they are: marks never fall)."""
+        done = reinstate(fleet, robot, token=token_of(ctx))
+        name = printable_name(done["robot"])
+        click.echo(f"robot {name} reinstated: it ships again" if done["reinstated"]
+                   else f"robot {name} was not retired; nothing changed")
 
     return fleet_group

@@ -10,10 +10,15 @@ by the ``/fleet/*`` endpoints of ``slr serve``.
 Event rules loaded on the fleet store run over the shipped events in that transaction (their
 complex events have the fleet store's robot: NULL on an unnamed fleet store); without event
 rules the rows go in as they are stored on the robot (no decoding).
+
+A robot taken out of service is retired from the fleet store (:func:`retire`, ``slr fleet
+retire``): the fleet's marks stop waiting for it, and its shipments are refused until
+:func:`reinstate`.
 """
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 from .encoding import INT64_MAX, INT64_MIN, decode
@@ -23,8 +28,9 @@ from .store import check_robot_name
 from .store.checks import shown, text_problem
 from .store.fleet_keys import FLEET_MARK, fleet_mark_key, names_a_type, read_fleet_mark_key
 
-__all__ = ["FLEET_MARK", "FleetBehind", "ShipmentRefused", "fleet_mark_key", "names_a_type",
-           "positions", "prepare", "read_fleet_mark_key", "receive"]
+__all__ = ["FLEET_MARK", "FleetBehind", "RobotRetired", "ShipmentRefused", "fleet_mark_key",
+           "names_a_type", "positions", "prepare", "read_fleet_mark_key", "receive", "reinstate",
+           "retire"]
 
 _JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
 # slr_meta prefix of the marks kept per robot: fleet/mark/<robot, escaped>/<name>/<arity or *>.
@@ -53,6 +59,18 @@ class ShipmentRefused(SLRError):
     serve`` it is a 400.
 
     >>> issubclass(ShipmentRefused, SLRError)
+    True
+    """
+
+
+class RobotRetired(ShipmentRefused):
+    """A shipment of a robot retired from the fleet store (:func:`retire`), or relaying its
+    rows: the fleet's marks no longer wait for it, so its events would come in behind marks
+    already moved past them. Nothing of the shipment is stored; sending it again changes
+    nothing until the robot is reinstated (:func:`reinstate`, ``slr fleet reinstate``): a
+    following pusher stops, over ``slr serve`` it is a 400.
+
+    >>> issubclass(RobotRetired, ShipmentRefused)
     True
     """
 
@@ -91,7 +109,9 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     complete up to t when each robot's is). The robots it knows are those it holds rows or
     marks of and those whose last contact said events wait on them (``pending`` above 0); a
     contact alone makes no robot one the mark waits for. The store's own name is not among
-    them: its own events are complete as far as its own marks say.
+    them: its own events are complete as far as its own marks say; nor are the robots
+    retired from the store (:func:`retire`), whose shipments, and rows of them relayed, are
+    refused with :class:`RobotRetired`.
 
     >>> import slr_sql
     >>> fleet = slr_sql.open()
@@ -128,7 +148,19 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             cep.after_add(token)
             return errors
     stored = 0
+    retired: dict[str, float] = {}
+
+    def take_retired(held: dict[str, float]) -> None:
+        retired.update(held)
+        if held:
+            _refuse_retired(robot, batches, held)
+    # the retirements are read first, their lock held shared to the commit: a retirement
+    # of a robot of this shipment waits for it, or it for the retirement. With the first
+    # batch's position when that is the first read (one statement, no round trip more)
+    first = None if after else next((i for i, b in enumerate(batches) if b[2]), None)
     with store.transaction():
+        if first is None:
+            take_retired(store.fleet_retired(hold="shared"))
         if after:
             held = store.fleet_positions(robot)
             for name, arity, position in after:
@@ -137,13 +169,14 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
                         f"the fleet store holds {name}/{arity} of robot {robot!r} up to seq "
                         f"{held.get((name, arity), 0)}, not {position} as it did: it was "
                         "restored or replaced; shipping again from what it holds")
-        for batch in batches:
+        for i, batch in enumerate(batches):
             name, arity, rows = batch[:3]
             if rows and type(rows[0]) is not tuple:
                 rows = [tuple(r) for r in rows]
             columns = batch[3] if len(batch) > 3 else None   # (from prepare)
             stored += store.fleet_receive(robot, name, arity, rows, store_events, columns,
-                                          (name, arity) in again)
+                                          (name, arity) in again,
+                                          take_retired if i == first else None)
         if marks or relayed:
             given = {robot: marks or {}, **{r: m for r, m in (relayed or {}).items()
                                             if r != robot}}
@@ -158,17 +191,172 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             # store has marks and no event yet counts from its first mark), and this one --
             # not the store itself, whose own events are complete as far as its own marks
             # say (they raise the same mark)
-            robots = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()
-                                            if _holds_marks_back(store, r)}
-            robots.add(robot)
-            robots.discard(store.robot)
-            for mk in sorted({mk for its_marks in given.values() for mk in its_marks}):
-                known = [store.meta_get(fleet_mark_key(r, mk)) for r in robots]
-                if all(v is not None for v in known):
-                    store.meta_raise(f"sync/mark/{mk}", min(float(v) for v in known))
+            robots = _counted_robots(store, retired) | {robot}
+            _raise_fleet_marks(store, robots, {mk for its_marks in given.values()
+                                               for mk in its_marks})
         if pending is not None:
             store.fleet_record_contact(robot, int(pending), head_arrival)
     return stored
+
+
+def retire(kb: Host, robot: str) -> dict[str, Any]:
+    """Retire ``robot`` from the fleet store ``kb`` (a robot scrapped, renamed, or one that
+    only ever made contact): the fleet's own marks stop waiting for it and are computed again
+    from the robots it still counts, so they may rise (never fall: marks only grow); its
+    events and marks stay (queries with ``robot=`` or ``origin/2`` still see them), and
+    ``slr fleet status`` lists it as retired. A later shipment of it, or relaying its rows,
+    is refused with :class:`RobotRetired` until :func:`reinstate`. With no robot left to
+    count, the fleet's marks stay where they are.
+
+    Returns ``{"robot", "retired_at", "already", "raised"}``: ``retired_at`` in seconds
+    since the epoch, ``already`` True when it was retired before (nothing changed),
+    ``raised`` the fleet's marks that rose (``{"p/N": t}``). A robot the store does not
+    know, its own name, or a store no robot shipped to is an :class:`SLRError`, nothing
+    changed.
+
+    >>> import slr_sql
+    >>> fleet = slr_sql.open()
+    >>> receive(fleet, "r2", [], {"seen/1": 5.0}, pending=0)
+    0
+    >>> receive(fleet, "r1", [], {"seen/1": 20.0}, pending=0)
+    0
+    >>> fleet.store.meta_get("sync/mark/seen/1")
+    5.0
+    >>> retire(fleet, "r2")["raised"], fleet.store.meta_get("sync/mark/seen/1")
+    ({'seen/1': 20.0}, 20.0)
+    >>> receive(fleet, "r2", [], {"seen/1": 30.0})
+    Traceback (most recent call last):
+    ...
+    slr_sql.shipping.RobotRetired: robot 'r2' was retired from this fleet store ... nothing of the shipment is stored
+    """
+    store = kb.store
+    robot = _known_robot(store, robot, "retired")
+    kb.loader.refresh()
+    raised: dict[str, float] = {}
+    with store.transaction():
+        retired = store.fleet_retired(hold="exclusive")
+        _refuse_unknown(store, robot, "retired")
+        if robot in retired:
+            return {"robot": robot, "retired_at": retired[robot], "already": True,
+                    "raised": {}}
+        at = time.time()
+        store.fleet_retire(robot, at)
+        retired[robot] = at
+        robots = _counted_robots(store, retired)
+        marks = {read[1] for read in map(read_fleet_mark_key, store.meta_items(FLEET_MARK))
+                 if read is not None}
+        before = {mk: store.meta_get(f"sync/mark/{mk}") for mk in marks}
+        _raise_fleet_marks(store, robots, marks)
+        for mk in sorted(marks):
+            now = store.meta_get(f"sync/mark/{mk}")
+            if now is not None and now != before[mk]:
+                raised[mk] = float(now)
+        if raised:
+            # synchronized queries waiting on this knowledge base: the marks moved under
+            # them on its own connection, which its change check does not see. Once
+            # committed (inside a caller's transaction the store's lock is held, and the
+            # synchronizer's lock comes before it)
+            def tell() -> None:
+                for listener in kb.progress_listeners:
+                    listener()
+            store.after_commit(tell)
+    return {"robot": robot, "retired_at": at, "already": False, "raised": raised}
+
+
+def reinstate(kb: Host, robot: str) -> dict[str, Any]:
+    """Take back the retirement of ``robot`` (:func:`retire`) on the fleet store ``kb``: it
+    ships again, and the fleet's marks wait for it again -- from where they are: a mark that
+    rose while it was retired stays (marks only grow), so its events shipped now below that
+    mark come in late for the synchronized queries answered meanwhile. Returns
+    ``{"robot", "reinstated"}`` (``reinstated`` False when it was not retired: nothing
+    changed). A robot the store does not know, its own name, or a store no robot shipped to
+    is an :class:`SLRError`.
+
+    >>> import slr_sql
+    >>> fleet = slr_sql.open(); receive(fleet, "r1", [], {"seen/1": 20.0}, pending=0)
+    0
+    >>> retire(fleet, "r1")["already"], reinstate(fleet, "r1"), reinstate(fleet, "r1")
+    (False, {'robot': 'r1', 'reinstated': True}, {'robot': 'r1', 'reinstated': False})
+    """
+    store = kb.store
+    robot = _known_robot(store, robot, "reinstated")
+    with store.transaction():
+        store.fleet_retired(hold="exclusive")
+        _refuse_unknown(store, robot, "reinstated")
+        done = store.fleet_reinstate(robot)
+    return {"robot": robot, "reinstated": done}
+
+
+def _known_robot(store: Any, robot: Any, what: str) -> str:
+    """``robot``, once it is a robot's name and not the store's own (the checks that need
+    no read of the store)."""
+    check_robot_name(robot)
+    if store.robot is not None and robot == store.robot:
+        raise SLRError(f"robot {robot!r} is this fleet store's own name: the fleet's marks "
+                       "never wait for the store's own events (its own marks say how far they "
+                       f"are complete); nothing {what}")
+    return robot
+
+
+def _refuse_unknown(store: Any, robot: str, what: str) -> None:
+    """An SLRError unless ``robot`` is one this fleet store knows: it holds its events, or
+    it shipped, made contact or has its rows relayed here (or it was retired)."""
+    known = {r["robot"] for r in store.fleet_contacts()} | set(store.robots())
+    known.discard(store.robot)
+    if not known:
+        raise SLRError(f"this store is no fleet store: no robot has shipped to it, so there "
+                       f"is no robot {robot!r} to retire or reinstate; nothing {what}")
+    if robot not in known:
+        names = sorted(known)
+        listed = ", ".join(repr(n) for n in names[:10]) + (", ..." if len(names) > 10 else "")
+        raise SLRError(f"this fleet store knows no robot {robot!r} (it knows {listed}); "
+                       f"nothing {what}")
+
+
+def _refuse_retired(robot: str, batches: list, retired: dict[str, float]) -> None:
+    """Raise :class:`RobotRetired` when ``robot`` is retired, or a row of ``batches`` is of
+    a retired robot (relayed)."""
+    def when(who: str) -> str:
+        return time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(retired[who]))
+
+    if robot in retired:
+        raise RobotRetired(
+            f"robot {robot!r} was retired from this fleet store ({when(robot)}, slr fleet "
+            "retire): the fleet's marks no longer wait for it, and it ships here no more; "
+            f"back in service, it is reinstated with 'slr fleet reinstate FLEET {robot}'; "
+            "nothing of the shipment is stored")
+    for batch in batches:
+        for row in batch[2]:
+            who = row[-1]
+            if who is not None and who in retired:
+                raise RobotRetired(
+                    f"robot {who!r} was retired from this fleet store ({when(who)}, slr fleet "
+                    f"retire): {robot!r} relaying its rows is refused, the fleet's marks no "
+                    "longer wait for them; reinstate it with 'slr fleet reinstate FLEET "
+                    f"{who}', or retire it on the relaying store too; nothing of the shipment "
+                    "is stored")
+
+
+def _counted_robots(store: Any, retired: dict[str, float]) -> set[str]:
+    """The robots the fleet's marks wait for: those it holds events of (relayed ones
+    included), and those that made contact with a history here or on the way -- not the
+    store itself (its own events are complete as far as its own marks say, and those raise
+    the same marks), nor the robots retired from it."""
+    robots = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()
+                                    if _holds_marks_back(store, r)}
+    robots.discard(store.robot)
+    return robots - set(retired)
+
+
+def _raise_fleet_marks(store: Any, robots: set[str], marks: set[str]) -> None:
+    """Raise the fleet's own mark of each of ``marks`` (``p/N``, ``p/*``) to the least of
+    the marks of ``robots``, once every one of them has one (none: the marks stay)."""
+    if not robots:
+        return
+    for mk in sorted(marks):
+        known = [store.meta_get(fleet_mark_key(r, mk)) for r in robots]
+        if all(v is not None for v in known):
+            store.meta_raise(f"sync/mark/{mk}", min(float(v) for v in known))
 
 
 def prepare(kb: Host, robot: str, batch: tuple) -> tuple:

@@ -149,6 +149,8 @@ CALLS = {
     "fleet_positions": lambda kb: kb.fleet_positions("r1"),
     "fleet_receive": lambda kb: kb.fleet_receive("r1", [("p", 1, [(1, "a", 1.0, 1.0, 1.0, None)])]),
     "fleet_status": lambda kb: kb.fleet_status(),
+    "fleet_retire": lambda kb: kb.fleet_retire("r1"),
+    "fleet_reinstate": lambda kb: kb.fleet_reinstate("r1"),
     "stats": lambda kb: kb.stats(),
     "remove_buffer": lambda kb: kb.remove_buffer(1),
 }

@@ -101,6 +101,7 @@ def _as_version_13(where: str, conn) -> None:
     for key, value in old.items():
         conn.execute(f"INSERT INTO slr_meta (key, value) VALUES ({p}, {p})",
                      (key, json.dumps(value)))
+    conn.execute("DROP TABLE slr_fleet_retired")   # (version 15's)
     conn.execute("DELETE FROM slr_migrations WHERE number >= 14")
     if where == "file":
         conn.execute("PRAGMA user_version = 13")
@@ -125,7 +126,7 @@ def as_version_13(where: str) -> None:
 
 def keys(where: str) -> dict:
     with slr_sql.open(where, clock=slr_sql.ManualClock(0)) as kb:
-        assert kb.store.schema_version() == migration_scripts()[-1][0] == 14
+        assert kb.store.schema_version() == migration_scripts()[-1][0] == 15
         return kb.store.meta_items("fleet/mark/")
 
 

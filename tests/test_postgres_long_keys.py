@@ -52,6 +52,7 @@ def as_version_12(url: str) -> None:
                     conn.execute(re.sub(r" WHERE .*", "", definition))
         conn.execute(_VERSION_12_CATALOG)
         conn.execute("DROP FUNCTION slr_key(text)")
+        conn.execute("DROP TABLE slr_fleet_retired")   # (version 15's)
         conn.execute("DELETE FROM slr_migrations WHERE number >= 13")
 
 
@@ -77,7 +78,7 @@ def test_a_version_12_store_is_migrated_and_then_takes_long_keys(tmp_path, postg
     assert "(arg2, t_end, t_start)" in old["slr_cep_ix__b__arg2_end"]
 
     with slr_sql.open(postgres_url, clock=ManualClock(10.0)) as kb:   # (migrates)
-        assert kb.store.schema_version() == migration_scripts()[-1][0] == 14
+        assert kb.store.schema_version() == migration_scripts()[-1][0] == 15
         # what was stored answers as before
         assert kb.query("e(X, N)^T") == [{"X": "cup", "N": 1, "T": 1.0}]
         assert [a["S"] for a in kb.query("c(X)^[S, E]")] == [1.0]

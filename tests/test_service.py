@@ -155,7 +155,8 @@ def test_health_and_openapi_describe_the_routes(server):
                 "/unload", "/programs", "/query", "/submit", "/submit/{handle}", "/explain",
                 "/mark_complete", "/complete_until", "/buffers", "/buffers/{buffer_id}", "/sql",
                 "/stats", "/subscribe", "/solutions", "/event_rules", "/unsubscribe", "/warnings",
-                "/fleet/positions", "/fleet/receive", "/fleet/status"}
+                "/fleet/positions", "/fleet/receive", "/fleet/status", "/fleet/retire",
+                "/fleet/reinstate"}
     assert set(spec["paths"]) == expected
     for path, methods in spec["paths"].items():
         for method, op in methods.items():

@@ -55,6 +55,7 @@ READS = {
     "fleet_counters": lambda s: s.fleet_counters(),
     "fleet_positions": lambda s: s.fleet_positions("r2"),
     "fleet_contacts": lambda s: s.fleet_contacts(),
+    "fleet_retired": lambda s: s.fleet_retired(),
     "fleet_read_after": lambda s: s.fleet_read_after("p", 1, 0, 10),
     "fleet_backlog": lambda s: s.fleet_backlog("p", 1, 0),
     "table_rows": lambda s: s.table_rows(),

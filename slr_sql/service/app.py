@@ -1450,6 +1450,26 @@ async def _fleet_status(svc: "_Service", request: Request) -> Any:
     return {"robots": await svc.call(svc.kb.store.fleet_contacts)}
 
 
+@_route("POST", "/fleet/retire", "Retire a robot from this fleet store (slr fleet retire): "
+        "the fleet's marks stop waiting for it, its shipments are refused; the server's own "
+        "token only.", body={"robot": ("string", True)},
+        response={"robot": "string", "retired_at": "Number", "already": "boolean",
+                  "raised": "object"})
+async def _fleet_retire(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import retire
+    b = await svc.body(request)
+    return encode_plain(await svc.call(retire, svc.kb, _field(b, "robot", str, required=True)))
+
+
+@_route("POST", "/fleet/reinstate", "Take back a robot's retirement (slr fleet reinstate); "
+        "the server's own token only.", body={"robot": ("string", True)},
+        response={"robot": "string", "reinstated": "boolean"})
+async def _fleet_reinstate(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import reinstate
+    b = await svc.body(request)
+    return await svc.call(reinstate, svc.kb, _field(b, "robot", str, required=True))
+
+
 @dataclass
 class _Submitted:
     handle: str

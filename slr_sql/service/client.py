@@ -742,6 +742,42 @@ class RemoteKnowledgeBase:
         return [dict(r) for r in _expect(self._get("/fleet/status"), "robots", list)]
 
     @_reads_answer
+    def fleet_retire(self, robot: str) -> dict[str, Any]:
+        """Retire ``robot`` from the server's fleet store (see
+        :func:`slr_sql.shipping.retire`; the server's own token only).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.fleet_receive("r1", [], {"seen/1": 5.0}, pending=0)
+        0
+        >>> done = kb.fleet_retire("r1"); done["already"], [r["retired_at"] is not None for r in kb.fleet_status()]
+        (False, [True])
+        >>> kb.fleet_reinstate("r1")
+        {'robot': 'r1', 'reinstated': True}
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        reply = self._post("/fleet/retire", {"robot": robot})
+        return {"robot": _expect(reply, "robot", str),
+                "retired_at": float(_expect(reply, "retired_at", (int, float))),
+                "already": _expect(reply, "already", bool),
+                "raised": dict(_expect(reply, "raised", dict))}
+
+    @_reads_answer
+    def fleet_reinstate(self, robot: str) -> dict[str, Any]:
+        """Take back the retirement of ``robot`` on the server's fleet store (see
+        :func:`slr_sql.shipping.reinstate`; the server's own token only).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.fleet_receive("r1", [], {"seen/1": 5.0}, pending=0)
+        0
+        >>> kb.fleet_reinstate("r1")      # (not retired: nothing changes)
+        {'robot': 'r1', 'reinstated': False}
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        reply = self._post("/fleet/reinstate", {"robot": robot})
+        return {"robot": _expect(reply, "robot", str),
+                "reinstated": _expect(reply, "reinstated", bool)}
+
+    @_reads_answer
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
                callback: Callable[[Any], Any] | None = None,

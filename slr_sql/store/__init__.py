@@ -407,8 +407,9 @@ class EventStore:
     @_doc(Fleet.receive)
     def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple],
                       store_events: Any = None, columns: list[tuple] | None = None,
-                      resync: bool = False) -> int:
-        return self._fleet.receive(robot, name, arity, rows, store_events, columns, resync)
+                      resync: bool = False, take_retired: Any = None) -> int:
+        return self._fleet.receive(robot, name, arity, rows, store_events, columns, resync,
+                                   take_retired)
 
     @_doc(Fleet.record_contact)
     def fleet_record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:
@@ -417,6 +418,18 @@ class EventStore:
     @_doc(Fleet.contacts)
     def fleet_contacts(self) -> list[dict[str, Any]]:
         return self._fleet.contacts()
+
+    @_doc(Fleet.retired)
+    def fleet_retired(self, hold: str | None = None) -> dict[str, float]:
+        return self._fleet.retired(hold)
+
+    @_doc(Fleet.retire)
+    def fleet_retire(self, robot: str, at: float) -> bool:
+        return self._fleet.retire(robot, at)
+
+    @_doc(Fleet.reinstate)
+    def fleet_reinstate(self, robot: str) -> bool:
+        return self._fleet.reinstate(robot)
 
     # ------------------------------------------------------------------ event types
 

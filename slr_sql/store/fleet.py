@@ -47,6 +47,11 @@ _ADD_ROUTE = ("INSERT INTO slr_fleet_routes (robot, via, shipped) VALUES (?, ?, 
               "ON CONFLICT (robot) DO UPDATE SET shipped = slr_fleet_routes.shipped + "
               "excluded.shipped")
 _TAKE_ROUTE = _ADD_ROUTE + " RETURNING via"
+# the advisory lock of the retirements on a server (b"slr_reti": apart from the others'
+# keys): a shipment holds it shared from its start, a retirement exclusively, so that a
+# shipment that read no retirement of its robot commits before a retirement of it reads
+# the marks, and one after it reads the retirement (on SQLite one writer at a time does it)
+_RETIRE_LOCK = int.from_bytes(b"slr_reti", "big")
 
 
 def check_robot_name(name: Any) -> str:
@@ -136,7 +141,7 @@ class ShipmentConflict(SLRError):
 class Fleet:
     """The robot name of a store and the shipping tables (``slr_robots``,
     ``slr_fleet_positions``, ``slr_fleet_robots``, migration 0006; ``slr_fleet_routes``,
-    migration 0010).
+    migration 0010; ``slr_fleet_retired``, migration 0015).
 
     >>> from slr_sql.store import EventStore
     >>> s = EventStore(None, robot="r1"); s.robot, s.robots()
@@ -314,7 +319,7 @@ class Fleet:
 
     def receive(self, robot: str, name: str, arity: int, rows: list[tuple],
                 store_events: Any = None, columns: list[tuple] | None = None,
-                resync: bool = False) -> int:
+                resync: bool = False, take_retired: Any = None) -> int:
         """Store a shipped batch of ``robot`` (rows as :meth:`read_after` gives them, one
         type, in sequence order) exactly once: the rows after the robot's position for the
         type go in and the position moves to the last row's sequence, in one transaction
@@ -328,6 +333,9 @@ class Fleet:
         holds an identical one of the robot (same arguments, start, end and robot), and
         the position becomes the batch's last sequence, lower than before as it may be
         (0 for a resync batch without rows: the robot holds none of the type).
+        ``take_retired``: called with :meth:`retired` (its lock held shared) before anything
+        is stored, read with the robot's position in one statement (the first batch of a
+        shipment: the retirements are read without a round trip of their own).
         Returns the number of rows stored."""
         robot = check_robot_name(robot)
         if not rows:
@@ -337,8 +345,17 @@ class Fleet:
             return 0
         with self.db.transaction():
             conn = self.db.conn   # (a server's connection: its own statements, below)
-            held_at = self.db.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? "
-                                      "AND type_name = ? AND type_arity = ?", (robot, name, arity))
+            held = "SELECT position FROM slr_fleet_positions WHERE robot = ? AND type_name = ? " \
+                "AND type_arity = ?"
+            if take_retired is None:
+                held_at = self.db.execute(held, (robot, name, arity))
+            else:
+                self._hold_retirements("shared")
+                both = self.db.execute("SELECT robot, retired_at, NULL FROM slr_fleet_retired "
+                                       f"UNION ALL SELECT NULL, NULL, position FROM ({held}) AS p",
+                                       (robot, name, arity))
+                held_at = [(r[2],) for r in both if r[0] is None]
+                take_retired({r[0]: float(r[1]) for r in both if r[0] is not None})
             position = held_at[0][0] if held_at else 0
             # (sequences ascend: what the fleet holds already is a head of the batch)
             if resync:
@@ -533,11 +550,50 @@ class Fleet:
                 "slr_fleet_robots.head_arrival), contact_at = excluded.contact_at",
                 (robot, pending, head_arrival, time.time()))
 
+    def retired(self, hold: str | None = None) -> dict[str, float]:
+        """The robots retired from this fleet store (``slr fleet retire``), each with the
+        time of its retirement (seconds since the epoch). ``hold``, inside a transaction:
+        ``"shared"`` (a shipment) or ``"exclusive"`` (a retirement or reinstatement) takes
+        the retirements' lock on a server first, until the transaction ends.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.fleet_retire("r1", 100.0), s.fleet_retired()
+        (True, {'r1': 100.0})
+        """
+        if hold is not None:
+            self._hold_retirements(hold)
+        return {robot: float(at) for robot, at in self.db.execute(
+            "SELECT robot, retired_at FROM slr_fleet_retired")}
+
+    def _hold_retirements(self, hold: str) -> None:
+        """On a server, the retirements' lock (``"shared"`` or ``"exclusive"``) until the
+        transaction ends, taken before the next statement."""
+        if self.db.dialect.name != "sqlite":
+            # (sent with the next statement, in its round trip -- with the transaction's
+            # BEGIN when it is still pending: a statement of its own before it, so that
+            # statement's snapshot is taken once the lock is held)
+            self.db.conn.lock_later(_RETIRE_LOCK, shared=hold == "shared")
+
+    def retire(self, robot: str, at: float) -> bool:
+        """Note ``robot`` retired at ``at`` (seconds since the epoch); False when it was
+        retired already (its first time kept)."""
+        with self.db.transaction():
+            return bool(self.db.execute(
+                "INSERT INTO slr_fleet_retired (robot, retired_at) VALUES (?, ?) "
+                "ON CONFLICT (robot) DO NOTHING RETURNING 1", (robot, float(at))))
+
+    def reinstate(self, robot: str) -> bool:
+        """Forget the retirement of ``robot``; False when it was not retired."""
+        with self.db.transaction():
+            return bool(self.db.execute(
+                "DELETE FROM slr_fleet_retired WHERE robot = ? RETURNING 1", (robot,)))
+
     def contacts(self) -> list[dict[str, Any]]:
         """Per robot that shipped: its ``slr_fleet_robots`` row as a dict, and per robot whose
         rows another store relays here (``slr_fleet_routes``): the rows stored of it, no
         contact; ``via`` is the relaying store's robot (None for a robot shipping here
-        itself); in name order."""
+        itself); ``retired_at`` the time it was retired (``slr fleet retire``), else None;
+        in name order."""
         with self.db.lock:
             self.db.check_open()
             cols = ["robot", "shipped", "last_arrival", "pending", "head_arrival", "contact_at"]
@@ -552,6 +608,14 @@ class Fleet:
                 rows[who] = {"robot": who, "shipped": shipped, "last_arrival": None,
                              "pending": None, "head_arrival": None, "contact_at": None,
                              "via": via}
+            for row in rows.values():
+                row["retired_at"] = None
+            for who, at in self.retired().items():
+                if who not in rows:   # (a robot known by its events alone: listed too)
+                    rows[who] = {"robot": who, "shipped": 0, "last_arrival": None,
+                                 "pending": None, "head_arrival": None, "contact_at": None,
+                                 "via": None}
+                rows[who]["retired_at"] = at
             return [rows[who] for who in sorted(rows)]
 
 

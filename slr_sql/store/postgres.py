@@ -458,9 +458,11 @@ class PgConnection:
         return (f"WITH slr_check AS ({check.sql}), {', '.join(parts)} "
                 f"SELECT * FROM slr_check"), params
 
-    def lock_later(self, key: int) -> None:
-        """``pg_advisory_xact_lock(key)`` before the next statement, sent with it."""
-        self.prelude.append(("SELECT pg_advisory_xact_lock(%s)", (key,)))
+    def lock_later(self, key: int, shared: bool = False) -> None:
+        """``pg_advisory_xact_lock(key)`` (``_shared`` with ``shared``) before the next
+        statement, sent with it (with the transaction's BEGIN when it is still pending)."""
+        self.prelude.append((f"SELECT pg_advisory_xact_lock{'_shared' if shared else ''}(%s)",
+                             (key,)))
 
     def savepoint_later(self, name: str) -> None:
         """``SAVEPOINT name`` before the next statement, sent with it."""
