@@ -194,9 +194,21 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             robots = _counted_robots(store, retired) | {robot}
             _raise_fleet_marks(store, robots, {mk for its_marks in given.values()
                                                for mk in its_marks})
+            _tell_progress_after_commit(kb)
         if pending is not None:
             store.fleet_record_contact(robot, int(pending), head_arrival)
     return stored
+
+
+def _tell_progress_after_commit(kb: Host) -> None:
+    # synchronized queries waiting on this knowledge base (a served fleet store's clients'):
+    # the fleet's marks moved under them on its own connection, which its change check does
+    # not see, so they waited for their timeout. Told once committed (inside a caller's
+    # transaction the store's lock is held, and the synchronizer's lock comes before it)
+    def tell() -> None:
+        for listener in kb.progress_listeners:
+            listener()
+    kb.store.after_commit(tell)
 
 
 def retire(kb: Host, robot: str) -> dict[str, Any]:
@@ -252,14 +264,7 @@ def retire(kb: Host, robot: str) -> dict[str, Any]:
             if now is not None and now != before[mk]:
                 raised[mk] = float(now)
         if raised:
-            # synchronized queries waiting on this knowledge base: the marks moved under
-            # them on its own connection, which its change check does not see. Once
-            # committed (inside a caller's transaction the store's lock is held, and the
-            # synchronizer's lock comes before it)
-            def tell() -> None:
-                for listener in kb.progress_listeners:
-                    listener()
-            store.after_commit(tell)
+            _tell_progress_after_commit(kb)
     return {"robot": robot, "retired_at": at, "already": False, "raised": raised}
 
 

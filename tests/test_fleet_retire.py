@@ -289,3 +289,20 @@ def test_over_slr_serve_only_the_servers_token_retires(tmp_path):
                                                                             ("r2", True)]
         assert client.fleet_reinstate("r2") == {"robot": "r2", "reinstated": True}
         assert fleet.push(r2, server.url, token="tok-r2").shipped == 0
+
+
+def test_a_pushed_mark_answers_a_synchronized_query_waiting_on_a_served_fleet(tmp_path):
+    """A shipment whose marks raise the fleet's mark releases the queries waiting on the
+    served fleet store: it raises the mark on the server's own connection, which the
+    server's check for other processes' commits does not see (the query waited for its
+    timeout before)."""
+    r1 = robot_store(tmp_path / "r1.db", "r1", 1e12, ("seen(a)^1",))
+    with ServiceProcess(tmp_path / "fleet.db") as server, \
+            slr_sql.connect(server.url) as client:
+        fleet.push(r1, server.url)
+        # (marks beyond the server's wall clock, so that only they can answer the query)
+        pending = client.submit("findall(X, seen(X)^_, L)", at=1.5e12)
+        assert not pending.done()
+        robot_store(tmp_path / "r1.db", "r1", 2e12)
+        fleet.push(r1, server.url)
+        assert [str(x) for x in pending.result(timeout=DEADLINE)[0]["L"]] == ["a"]
