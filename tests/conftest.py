@@ -15,7 +15,18 @@ if str(REPO) not in sys.path:  # run from a checkout without installing the pack
     sys.path.insert(0, str(REPO))
 
 import slr_sql  # noqa: E402
-from hypothesis import settings  # noqa: E402
+
+# pytest rewrites the asserts of every installed package that provides a pytest plugin, all
+# of hypothesis's ~130 modules among them, and keeps the rewritten code in a pyc of its own
+# beside the package's; with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes) it
+# wrote none, and every pytest process (the controller, each xdist worker) rewrote them again:
+# ~1 s of CPU each. Written once, a later process reads them.
+_dont_write_bytecode = sys.dont_write_bytecode
+sys.dont_write_bytecode = False
+try:
+    from hypothesis import settings  # noqa: E402
+finally:
+    sys.dont_write_bytecode = _dont_write_bytecode
 # (a hook of this conftest's: an xdist worker's last collections made cheap)
 from xdist_worker_exit import pytest_sessionfinish  # noqa: E402, F401
 
