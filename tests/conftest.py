@@ -16,11 +16,12 @@ if str(REPO) not in sys.path:  # run from a checkout without installing the pack
 
 import slr_sql  # noqa: E402
 
-# pytest rewrites the asserts of every installed package that provides a pytest plugin, all
-# of hypothesis's ~130 modules among them, and keeps the rewritten code in a pyc of its own
-# beside the package's; with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes) it
-# wrote none, and every pytest process (the controller, each xdist worker) rewrote them again:
-# ~1 s of CPU each. Written once, a later process reads them.
+# pytest rewrites the asserts of every installed package that provides a pytest plugin (the
+# ~75 modules of hypothesis imported here among them) and keeps the rewritten code in a pyc
+# of its own beside the package's; with PYTHONDONTWRITEBYTECODE set (as in this project's
+# sandboxes) it wrote none, and every pytest process (the controller, each xdist worker)
+# rewrote them again: ~1 s of CPU each. Written once (into the installed package's
+# __pycache__), a later process reads them.
 _dont_write_bytecode = sys.dont_write_bytecode
 sys.dont_write_bytecode = False
 try:
