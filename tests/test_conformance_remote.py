@@ -30,17 +30,23 @@ def _count_tests(path: Path) -> int:
                if isinstance(node, ast.FunctionDef) and node.name.startswith("test"))
 
 
-def run_conformance_files(tmp_path: Path, plugin: str) -> str:
-    """Run SPEC's conformance files in a pytest of their own with ``plugin``; assert every
-    test passed and return the output (the plugin's summary line is in it)."""
+def run_conformance_files(tmp_path: Path, plugin: str, env_extra: dict | None = None) -> str:
+    """Run SPEC's conformance files in a pytest of their own with ``plugin`` (``env_extra``
+    added to its environment); assert every test passed and return the output (the plugin's
+    summary line is in it)."""
     directory = _conformance_dir()
     files = [str(directory / f) for f in FILES]
     expected = sum(_count_tests(Path(f)) for f in files)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(TESTS), env.get("PYTHONPATH", "")])
+    # of the installed pytest plugins only pytest-timeout (the conformance files use no
+    # other): loading every one (hypothesis, benchmark, anyio, xdist) cost a second or two
+    # of CPU per run
+    env["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = "1"
+    env.update(env_extra or {})
     result = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", plugin,
-         "--rootdir", str(tmp_path), "-o", "timeout=120", *files],
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "pytest_timeout",
+         "-p", plugin, "--rootdir", str(tmp_path), "-o", "timeout=120", *files],
         capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
     output = result.stdout + result.stderr
     assert result.returncode == 0, output[-5000:]

@@ -32,10 +32,14 @@ def test_a_workers_last_collections_traverse_none_of_its_sessions_objects(tmp_pa
         "    pass\n")
     seen = tmp_path / "seen"
     seen.mkdir()
-    env = dict(os.environ, SEEN=str(seen), PYTHONPATH=os.pathsep.join(
-        [str(TESTS)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    # only xdist among the installed plugins: each of the three processes loaded every one
+    # (hypothesis alone ~1 s of CPU), 5 s of CPU for a run whose tests take milliseconds;
+    # what is checked is this hook's in a real two-worker run
+    env = dict(os.environ, SEEN=str(seen), PYTEST_DISABLE_PLUGIN_AUTOLOAD="1",
+               PYTHONPATH=os.pathsep.join(
+                   [str(TESTS)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
     run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                          "-n", "2", str(tmp_path)], cwd=tmp_path, env=env,
+                          "-p", "xdist.plugin", "-n", "2", str(tmp_path)], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout + run.stderr
     workers = {p.stem: json.loads(p.read_text()) for p in seen.iterdir()}
