@@ -395,3 +395,14 @@ def test_stop_during_the_handshake_of_the_first_answer_ends_that_next(server):
         proxy.release.set()
         proxy.close()
     wait_for_queries(server, running=0, solutions=0)
+
+
+def test_slr_query_of_a_served_goal_without_a_limit_asks_one_query(short_server):
+    """Without --limit every answer is wanted: one request gives them (here 10000 in well
+    under the server's one second). Taken one at a time over /solutions, each answer was a
+    round trip the server's query time counted: the command ran out of it."""
+    r = subprocess.run([sys.executable, "-m", "slr_sql", "query", short_server.url,
+                        "between(1, 10000, X)"], capture_output=True, text=True,
+                       cwd=ROOT, env=slr_env(), timeout=DEADLINE)
+    assert (r.returncode, r.stderr) == (0, ""), r.stderr
+    assert r.stdout.splitlines() == [f"X = {n}" for n in range(1, 10001)]
