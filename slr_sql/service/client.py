@@ -1715,7 +1715,8 @@ class RemoteSolutions:
             return self._receive(ws)
         except BaseException as exc:
             self.close()   # (an error, Ctrl-C: the query ends on the server too)
-            if self._stopped and not isinstance(exc, (SLRError, KeyboardInterrupt)):
+            if self._stopped and not isinstance(exc, (SLRError, StopIteration,
+                                                      KeyboardInterrupt)):
                 # (what a connection closed by stop() under this call raised)
                 raise SLRError(STOPPED_BY_CALLER) from None
             raise
