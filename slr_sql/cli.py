@@ -863,6 +863,17 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
                     _err(f"% {line}")
             for answer in answers[:limit]:
                 printer(answer)
+        elif limit is None and not isinstance(kb, KnowledgeBase):
+            # (served, every answer wanted: one POST /query. Over /solutions each answer is
+            # a round trip of its own, which the server's query time counts: a goal of tens
+            # of thousands of answers that one request gives in a second ran out of it)
+            try:
+                for answer in kb.query(goal, at=at, timeout=timeout,
+                                       **({"robot": robot} if robot is not None else {})):
+                    printer(answer)
+            except slr_sql.SLRTimeout as exc:
+                _err(f"error: {error_words(exc)}")
+                sys.exit(1)
         elif limit != 0:
             # (answers one at a time, local or served: the search, here or on the server,
             # ends at the limit's last answer instead of running on)

@@ -291,7 +291,7 @@ class ProgramLoader:
                 program, decls = self.program.copy(), self.declarations.copy()
                 self._add_clauses(clauses, program, decls, name)
             self._check_event_arities(decls, filename)
-            self._check_consumption_heads(decls, name, filename)
+            self._check_consumption_heads(decls, name, filename, clauses)
             self._install(program, decls, lambda: self.store.replace_named_program(
                 name, text, filename) if replace else self.store.append_program(
                 text, filename, name), (text, clauses))
@@ -314,16 +314,30 @@ class ProgramLoader:
         return min(ids) if ids else None
 
     @staticmethod
-    def _check_consumption_heads(decls: Declarations, name: str, filename: str) -> None:
-        """Refuse ``:- consumption(Head/N, Policy)`` in the program ``name`` when Head/N is
-        the head of event rules of other programs and of none of its own: a directive
-        governs its own program's rules, so it would change nothing while its writer
-        meant to change how those other rules pair events (which a program must not do
-        to another). A head no program defines yet is accepted: the directive waits for
-        rules of its own program (a shell's ``user`` program gets them text by text)."""
+    def _check_consumption_heads(decls: Declarations, name: str, filename: str,
+                                 clauses: list[Clause]) -> None:
+        """Refuse ``:- consumption(Head/N, Policy)`` in ``clauses``, the text loaded into the
+        program ``name``, when Head/N is the head of event rules of other programs and of
+        none of its own: a directive governs its own program's rules, so it would change
+        nothing while its writer meant to change how those other rules pair events (which
+        a program must not do to another). A head no program defines yet is accepted: the
+        directive waits for rules of its own program (a shell's ``user`` program gets them
+        text by text). A directive of an earlier text is not looked at again: another
+        program may have defined its head since, which must not refuse every later text of
+        this one."""
+        from .cep import consumption_directive
+        asked = set()
+        for clause in clauses:
+            if clause.head is None:
+                try:
+                    directive = consumption_directive(clause.body)
+                except SLRError:
+                    continue
+                if directive is not None and directive[0] is not None:
+                    asked.add(directive[0])
         own = {rule.head_key for rule in decls.read_rules if rule.program == name}
         for head, policy in sorted(((h, p) for h, p in decls.consumption.get(name, {}).items()
-                                    if h is not None), key=repr):
+                                    if h in asked), key=repr):
             if head in own:
                 continue
             others = sorted({rule.program for rule in decls.read_rules

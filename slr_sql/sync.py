@@ -151,7 +151,7 @@ def parse_type(spec: Any) -> tuple[str, int | None]:
             # (text given as Prolog writes the indicator; an atom of a term is read already)
             return parse_indicator(text)
         name, sep, n = text.rpartition("/")
-        if sep and name and n.isdigit():
+        if sep and name and n.isascii() and n.isdigit():
             return name, int(n)
         if text and "/" not in text:
             return text, None

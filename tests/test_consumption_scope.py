@@ -103,3 +103,23 @@ def test_a_head_directive_for_rules_only_another_program_has_is_refused(backend)
         assert _policies(kb)[("later", "e/1")] == "chronological"
         assert {r["policy"] for r in kb.event_rules() if r["program"] == "pairs"} == \
             {"unrestricted"}
+
+
+def test_a_waiting_head_directive_never_blocks_a_later_load_of_its_program(backend):
+    """A head directive waiting for rules of its own program while another program then
+    defined the head: every later load into the directive's program was refused, whatever
+    its text (``p(1).`` here), for a directive written long before -- as in a store written
+    before directives were scoped to their program. A text that gives such a directive
+    itself is still refused."""
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as kb:
+        kb.load(":- consumption(c/1, recent).")          # no rules of c/1 yet: it waits
+        kb.load(PAIRS, name="pairs")                      # another program defines c/1
+        kb.load("p(1).")
+        assert kb.query("p(X)") == [{"X": 1}]
+        assert _policies(kb) == {("pairs", "c/1"): "unrestricted"}
+        before = kb.programs()
+        with pytest.raises(slr_sql.SLRError, match=r"consumption\(c/1, chronological\): "
+                                                   r"the event rules of c/1 are in the "
+                                                   r"program 'pairs'"):
+            kb.load(":- consumption(c/1, chronological).")
+        assert kb.programs() == before

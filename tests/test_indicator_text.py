@@ -115,3 +115,15 @@ def test_slr_fleet_push_takes_a_quoted_name(store, tmp_path):
     bad = slr("fleet", "push", store, fleet, "--robot", "r1", "--type", "'x/seen/2")
     assert bad.returncode != 0 and "is not an indicator" in bad.stderr
     assert "Traceback" not in bad.stderr
+
+
+@pytest.mark.parametrize("text", ["seen/²", "seen/１"])
+def test_an_arity_of_digits_other_than_ascii_is_refused_in_words(text):
+    """``str.isdigit`` holds for a superscript two, which ``int`` cannot read: the
+    SLRError said ``ValueError: invalid literal for int()``; a fullwidth digit was read as
+    the arity, where the other readers of a type take the text for a name."""
+    with slr_sql.open(clock=ManualClock(0.0)) as kb:
+        for call in (lambda: kb.mark_complete(text, 9), lambda: kb.complete_until(text)):
+            with pytest.raises(slr_sql.SLRError, match="expected an event type p/N or p"):
+                call()
+        assert _marks(kb) == {}

@@ -316,3 +316,93 @@ def test_a_server_stopping_with_a_query_open_at_an_answer_stops_at_once(tmp_path
     assert out == " ;\n"
     assert errors.startswith("error: the query's connection closed") and \
         errors.count("\n") == 1 and "Traceback" not in errors, errors
+
+
+class _HeldHandshakeProxy:
+    """A TCP proxy (threads) in front of the server that holds the WebSocket handshake of
+    ``/solutions`` until ``release`` is set (``handshaking`` is set once it holds one); every
+    other connection goes through at once."""
+
+    def __init__(self, url: str):
+        import socket
+        self.target = url.rsplit(":", 1)
+        self.handshaking = threading.Event()
+        self.release = threading.Event()
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self.url = f"http://127.0.0.1:{self._listener.getsockname()[1]}"
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self._listener.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._one, args=(conn,), daemon=True).start()
+
+    def _one(self, conn) -> None:
+        import socket
+        first = conn.recv(65536)
+        if first.startswith(b"GET /solutions"):
+            self.handshaking.set()
+            self.release.wait(DEADLINE)
+        host = self.target[0].split("//")[1]
+        upstream = socket.create_connection((host, int(self.target[1])))
+        upstream.sendall(first)
+
+        def pump(source, sink) -> None:
+            try:
+                while data := source.recv(65536):
+                    sink.sendall(data)
+            except OSError:
+                pass
+            for end in (source, sink):
+                try:
+                    end.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+        threading.Thread(target=pump, args=(upstream, conn), daemon=True).start()
+        pump(conn, upstream)
+
+    def close(self) -> None:
+        self._listener.close()
+
+
+def test_stop_during_the_handshake_of_the_first_answer_ends_that_next(server):
+    """`stop()` from another thread while the first `next()` still opened its WebSocket:
+    the connection it then opened was kept, its goal sent and its answer waited for (here
+    none comes: the `next()` hung for the server's whole query time, and the server kept
+    the query)."""
+    proxy = _HeldHandshakeProxy(server.url)
+    outcome: queue.Queue = queue.Queue()
+    try:
+        with slr_sql.connect(proxy.url) as kb:
+            answers = kb.solutions("repeat, fail", timeout=600)
+
+            def search() -> None:
+                try:
+                    outcome.put(next(answers))
+                except BaseException as exc:  # noqa: BLE001 - the test's answer
+                    outcome.put(exc)
+            threading.Thread(target=search, daemon=True).start()
+            assert proxy.handshaking.wait(DEADLINE)
+            answers.stop()
+            proxy.release.set()
+            ended = outcome.get(timeout=DEADLINE)
+            assert isinstance(ended, slr_sql.SLRError) and \
+                str(ended) == "the query was stopped while it looked for its next answer", ended
+    finally:
+        proxy.release.set()
+        proxy.close()
+    wait_for_queries(server, running=0, solutions=0)
+
+
+def test_slr_query_of_a_served_goal_without_a_limit_asks_one_query(short_server):
+    """Without --limit every answer is wanted: one request gives them (here 10000 in well
+    under the server's one second). Taken one at a time over /solutions, each answer was a
+    round trip the server's query time counted: the command ran out of it."""
+    r = subprocess.run([sys.executable, "-m", "slr_sql", "query", short_server.url,
+                        "between(1, 10000, X)"], capture_output=True, text=True,
+                       cwd=ROOT, env=slr_env(), timeout=DEADLINE)
+    assert (r.returncode, r.stderr) == (0, ""), r.stderr
+    assert r.stdout.splitlines() == [f"X = {n}" for n in range(1, 10001)]

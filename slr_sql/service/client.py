@@ -1701,21 +1701,30 @@ class RemoteSolutions:
         if self._answers is not None:
             return next(self._answers)
         try:
-            if self._ws is None:
-                if not self._open():
+            # (the connection read once: stop() from another thread sets self._ws to None)
+            ws = self._ws
+            if ws is None:
+                ws = self._open()
+                if ws is None:
                     return next(self)
             else:
                 try:
-                    self._ws.send('{"op":"next"}')
+                    ws.send('{"op":"next"}')
                 except self._closed_exc:
                     pass   # the server ended the query (its time ran out): its last word says why
-            return self._receive()
-        except BaseException:
+            return self._receive(ws)
+        except BaseException as exc:
             self.close()   # (an error, Ctrl-C: the query ends on the server too)
+            if self._stopped and not isinstance(exc, (SLRError, StopIteration,
+                                                      KeyboardInterrupt)):
+                # (what a connection closed by stop() under this call raised)
+                raise SLRError(STOPPED_BY_CALLER) from None
             raise
 
-    def _open(self) -> bool:
-        """Connect and send the goal; False when the server has no ``/solutions``."""
+    def _open(self) -> Any:
+        """Connect and send the goal: the WebSocket; None when the server has no
+        ``/solutions``, or when :meth:`stop` or :meth:`close` came while it connected (the
+        connection closed again; then the next ``next()`` says so)."""
         from websockets.exceptions import InvalidStatus, WebSocketException
         from websockets.sync.client import connect as ws_connect
 
@@ -1724,9 +1733,15 @@ class RemoteSolutions:
         headers = {"Authorization": client._headers["Authorization"]} \
             if "Authorization" in client._headers else None
         try:
-            self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
-                                  max_size=None, ssl=client._tls, proxy=None).__enter__()
-            self._ws.send(dumps(self._request).decode("utf-8"))
+            ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
+                            max_size=None, ssl=client._tls, proxy=None).__enter__()
+            if self.closed:
+                # stop() or close() from another thread while this connected: it saw no
+                # connection to close, so the query would have run on the server unasked
+                ws.close()
+                return None
+            self._ws = ws
+            ws.send(dumps(self._request).decode("utf-8"))
         except InvalidStatus as exc:
             if exc.response.status_code not in (403, 404):   # no such WebSocket route
                 raise _not_subscribed(url, exc, "ask") from None
@@ -1734,7 +1749,7 @@ class RemoteSolutions:
             self._answers = iter(decode_answers(_expect(client._post(
                 "/query", body, timeout=client._read_timeout(body.get("timeout"))),
                 "answers", list)))
-            return False
+            return None
         except (OSError, WebSocketException) as exc:
             refused = _refused_certificate(exc)
             if refused is not None:
@@ -1743,14 +1758,14 @@ class RemoteSolutions:
                 raise ServiceUnavailable(f"cannot reach slr serve at {client.url}: {exc}",
                                          status=0) from None
             raise _not_subscribed(url, exc, "ask") from None
-        return True
+        return ws
 
-    def _receive(self) -> dict[str, Any]:
+    def _receive(self, ws: Any) -> dict[str, Any]:
         from websockets.exceptions import WebSocketException
 
         wait = self._client._read_timeout(self._request.get("timeout"))
         try:
-            data = self._ws.recv(wait)
+            data = ws.recv(wait)
         except TimeoutError:
             raise ServiceUnavailable(f"the server sent no answer within {wait:g} s",
                                      status=0) from None
