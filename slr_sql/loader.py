@@ -16,6 +16,7 @@ fact tables were built from, a fleet store refreshes before it writes.
 """
 from __future__ import annotations
 
+import warnings
 from typing import Any, Callable, Iterable
 
 from .clocks import parse_duration
@@ -131,6 +132,7 @@ class ProgramLoader:
         self.program, self.declarations = program, decls
         self.host.engine.program = program
         self.version = version
+        _warn_policies_of_no_rule(decls)
         self.host.plans.clear()
         for listener in self.host.reload_listeners:
             listener(self.host)
@@ -295,6 +297,7 @@ class ProgramLoader:
             self._install(program, decls, lambda: self.store.replace_named_program(
                 name, text, filename) if replace else self.store.append_program(
                 text, filename, name), (text, clauses))
+        _warn_policies_of_no_rule(decls, name)
 
     def unload(self, name: str) -> None:
         """Remove the program ``name`` in one transaction (an :class:`SLRError` when no
@@ -402,6 +405,49 @@ class ProgramLoader:
             raise
         self.host.engine.program = program
         self.host.plans.clear()
+
+
+class ConsumptionScopeWarning(UserWarning):
+    """A program's ``:- consumption(Policy).`` sets the policy of no event rule: the program
+    holds no event rule of its own while other programs hold some, and a directive sets its
+    own program's rules only (docs/events.md, "Whose rules a directive sets"). A store loaded
+    by a version of slr_sql before that rule may hold such a program: its directive set the
+    other programs' rules then, and no longer does."""
+
+
+def policies_of_no_rule(decls: Declarations) -> list[tuple[str, str, list[str]]]:
+    """``(program, policy, programs with event rules)`` of each program whose
+    ``:- consumption(Policy).`` sets no rule's policy (:class:`ConsumptionScopeWarning`).
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open()
+    >>> kb.load("c(X) <- a(X) seq b(X).")
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     kb.load(":- consumption(recent).", name="policy")
+    >>> policies_of_no_rule(kb.loader.declarations), [w.category.__name__ for w in caught]
+    ([('policy', 'recent', ['main'])], ['ConsumptionScopeWarning'])
+    """
+    owners = sorted({str(rule.program) for rule in decls.read_rules})
+    if not owners:
+        return []   # (no rule anywhere yet: the directive waits for its program's rules)
+    return [(program, policies[None], owners) for program, policies in
+            sorted(decls.consumption.items()) if None in policies and program not in owners]
+
+
+def _warn_policies_of_no_rule(decls: Declarations, program: str | None = None) -> None:
+    """Warn (:class:`ConsumptionScopeWarning`) of each program's (or ``program``'s)
+    ``:- consumption(Policy).`` that sets no rule's policy: at a load, and when a store's
+    program is read (a store loaded before a directive governed its own program only)."""
+    for name, policy, owners in policies_of_no_rule(decls):
+        if program is not None and name != program:
+            continue
+        warnings.warn(ConsumptionScopeWarning(
+            f":- consumption({policy}) in the program {shown(name)} sets the policy of no "
+            f"event rule: {shown(name)} holds none, and a consumption directive sets the "
+            f"rules of its own program only (the event rules of "
+            f"{', '.join(shown(o) for o in owners)} keep their own policy; put the directive "
+            f"in the text of the program whose rules it is for)"), stacklevel=2)
 
 
 def _indicator(t: Any) -> tuple[str, int]:

@@ -7,6 +7,7 @@ programs define is refused, changing nothing. On a SQLite file and on PostgreSQL
 from __future__ import annotations
 
 import pytest
+from test_cli import slr
 
 import slr_sql
 from slr_sql import ManualClock
@@ -123,3 +124,45 @@ def test_a_waiting_head_directive_never_blocks_a_later_load_of_its_program(backe
                                                    r"program 'pairs'"):
             kb.load(":- consumption(c/1, chronological).")
         assert kb.programs() == before
+
+
+def _scope_warnings(caught) -> list[str]:
+    return [str(w.message) for w in caught
+            if issubclass(w.category, slr_sql.loader.ConsumptionScopeWarning)]
+
+
+def test_a_policy_that_sets_no_rule_is_warned_of_at_its_load_and_at_each_open(backend):
+    """A program whose ``:- consumption(Policy).`` has no event rule of its own to set, while
+    other programs hold rules, is warned of when it is loaded and when the store is opened
+    (a store loaded before a directive governed its own program only holds such programs:
+    the rules its directive set before pair events by their own policy now); a directive
+    beside its program's rules, or waiting for rules while no program has any, is not."""
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as kb:
+        with pytest.warns(slr_sql.loader.ConsumptionScopeWarning) as caught:
+            kb.load(":- consumption(chronological).", name="early")   # no rule anywhere yet
+            kb.load(LATEST, name="latest")
+            kb.load(PAIRS, name="pairs")
+            kb.load(":- consumption(recent).", name="policy")
+        assert _scope_warnings(caught) == [
+            ":- consumption(recent) in the program 'policy' sets the policy of no event rule: "
+            "'policy' holds none, and a consumption directive sets the rules of its own "
+            "program only (the event rules of 'latest', 'pairs' keep their own policy; put "
+            "the directive in the text of the program whose rules it is for)"]
+        assert _policies(kb)[("pairs", "c/1")] == "unrestricted"
+    with pytest.warns(slr_sql.loader.ConsumptionScopeWarning) as caught:
+        slr_sql.open(backend, clock=ManualClock(0.0)).close()
+    assert [m.split(" sets ")[0] for m in _scope_warnings(caught)] == [
+        ":- consumption(chronological) in the program 'early'",
+        ":- consumption(recent) in the program 'policy'"]
+
+
+def test_slr_load_says_a_policy_that_sets_no_rule_in_one_line(tmp_path):
+    db, rules, policy = tmp_path / "s.db", tmp_path / "rules.pl", tmp_path / "policy.pl"
+    rules.write_text(PAIRS)
+    policy.write_text(":- consumption(recent).\n")
+    assert slr("load", str(db), str(rules)).returncode == 0
+    done = slr("load", str(db), str(policy), "--name", "policy")
+    assert done.returncode == 0 and "Traceback" not in done.stderr
+    assert done.stderr.startswith("warning: :- consumption(recent) in the program 'policy' "
+                                  "sets the policy of no event rule:"), done.stderr
+    assert len(done.stderr.splitlines()) == 1
