@@ -1323,11 +1323,14 @@ class Solutions:
     def __init__(self, answers: Iterator[dict[str, Any]], stop: threading.Event):
         self._answers = answers
         self._stop = stop
+        self._closed = False
 
     def __iter__(self) -> "Solutions":
         return self
 
     def __next__(self) -> dict[str, Any]:
+        if self._closed:
+            raise StopIteration
         if self._stop.is_set():
             raise SLRError(STOPPED_BY_CALLER)
         return next(self._answers)
@@ -1337,9 +1340,14 @@ class Solutions:
         self._stop.set()
 
     def close(self) -> None:
-        """End the iteration between two answers (not while another thread is in
-        ``next()``: stop it first)."""
-        self._answers.close()
+        """End the iteration: later ``next()`` calls raise StopIteration. From another thread
+        while a ``next()`` looks for an answer, that search ends as :meth:`stop` ends it."""
+        self._closed = True
+        self._stop.set()    # (what a next() under way in another thread checks)
+        try:
+            self._answers.close()
+        except ValueError:
+            pass   # (that next() is running the generator: the stop ends it there)
 
 
 def _boundary(method: Callable) -> Callable:

@@ -144,6 +144,21 @@ def test_the_client_takes_served_answers_one_at_a_time(server):
     wait_for_queries(server, running=0, solutions=0)
 
 
+def test_closing_the_client_ends_its_open_answers_on_the_server(server):
+    """A program that closes its client with answers still open (it left a for loop with
+    break): each query ends on the server, and a later next() says the connection closed;
+    answers that ended before stay ended."""
+    kb = slr_sql.connect(server.url)
+    endless, finished = kb.solutions("between(1, inf, X)"), kb.solutions("X = 1")
+    assert next(endless) == {"X": 1} and list(finished) == [{"X": 1}]
+    assert wait_for_queries(server, solutions=1)["solutions"] == 1
+    kb.close()
+    wait_for_queries(server, running=0, solutions=0)
+    with pytest.raises(slr_sql.SLRError, match="the connection to the knowledge base was closed"):
+        next(endless)
+    assert list(finished) == []
+
+
 @pytest.mark.parametrize("message, words", [
     ('{"op": "next"}', 'the first message must be {"op": "solutions", "goal": ...}'),
     ('{"op": "solutions"}', '"goal" is required'),
@@ -258,11 +273,13 @@ def test_a_server_without_solutions_is_asked_with_one_query(tmp_path):
         proc.communicate(timeout=DEADLINE)
 
 
+@pytest.mark.parametrize("how", ["stop", "close"])
 @pytest.mark.parametrize("where", ["local", "served"])
-def test_stop_from_another_thread_ends_the_search_for_the_next_answer(server, where):
-    """`solutions(...).stop()`: the search for the next answer, under way in another thread
-    (no answer for ever), ends with an SLRError, on a local knowledge base as over the
-    service, where the server's query ends too."""
+def test_stop_from_another_thread_ends_the_search_for_the_next_answer(server, where, how):
+    """`solutions(...).stop()` or `.close()`: the search for the next answer, under way in
+    another thread (no answer for ever), ends with an SLRError, on a local knowledge base
+    as over the service, where the server's query ends too; after close() the iteration
+    has ended, after stop() each next() says it was stopped."""
     searching = threading.Event()
     if where == "local":
         kb = slr_sql.open()
@@ -287,12 +304,15 @@ def test_stop_from_another_thread_ends_the_search_for_the_next_answer(server, wh
             assert searching.wait(DEADLINE)
         else:
             wait_for_queries(server, running=1, solutions=1)
-        answers.stop()
+        getattr(answers, how)()
         ended = outcome.get(timeout=DEADLINE)
         assert isinstance(ended, slr_sql.SLRError) and \
             str(ended) == "the query was stopped while it looked for its next answer", ended
-        with pytest.raises(slr_sql.SLRError, match="stopped"):
-            next(answers)
+        if how == "close":
+            assert list(answers) == []
+        else:
+            with pytest.raises(slr_sql.SLRError, match="stopped"):
+                next(answers)
     if where == "served":
         wait_for_queries(server, running=0, solutions=0)
 

@@ -50,6 +50,7 @@ import os
 import ssl
 import threading
 import time
+import weakref
 from concurrent.futures import Future, InvalidStateError
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping
@@ -291,6 +292,9 @@ class RemoteKnowledgeBase:
         self._answered = threading.local()   # .path: the request the last answer was of
         self.subscribe_batch = 256        # answers per WebSocket frame at most (1..1000)
         self._pending: dict[RemotePendingQuery, None] = {}   # waiting, in submission order
+        # the answers of solutions() not ended yet: their WebSockets hold queries on the
+        # server, which close() ends (the ones a program dropped are closed as collected)
+        self._solutions: weakref.WeakSet[RemoteSolutions] = weakref.WeakSet()
         self._lock = threading.Lock()
         self.closed = False
 
@@ -414,6 +418,10 @@ class RemoteKnowledgeBase:
             pending = list(self._pending)
         for p in pending:
             p._fail(SLRError("the connection to the knowledge base was closed"))
+        with self._lock:
+            solutions = list(self._solutions)
+        for answers in solutions:
+            answers._shut(SLRError("the connection to the knowledge base was closed"))
         self._pool.close()
 
     def __enter__(self) -> "RemoteKnowledgeBase":
@@ -867,7 +875,10 @@ class RemoteKnowledgeBase:
         request["op"] = "solutions"
         if robot is not None:
             request["robot"] = robot
-        return RemoteSolutions(self, request)
+        answers = RemoteSolutions(self, request)
+        with self._lock:
+            self._solutions.add(answers)
+        return answers
 
     @_reads_answer
     def goal_warnings(self, goal: str) -> list[str]:
@@ -1685,6 +1696,7 @@ class RemoteSolutions:
         self._answers: Iterator[dict[str, Any]] | None = None   # an older server's
         self.closed = False
         self._stopped = False
+        self._failure: SLRError | None = None   # why it was ended from outside (_shut)
         from websockets.exceptions import WebSocketException   # (the service extra's)
         self._closed_exc: type[Exception] = WebSocketException
 
@@ -1692,6 +1704,8 @@ class RemoteSolutions:
         return self
 
     def __next__(self) -> dict[str, Any]:
+        if self._failure is not None:
+            raise self._failure
         if self._stopped:
             raise SLRError(STOPPED_BY_CALLER)
         if self.closed:
@@ -1714,9 +1728,12 @@ class RemoteSolutions:
                     pass   # the server ended the query (its time ran out): its last word says why
             return self._receive(ws)
         except BaseException as exc:
+            closed_under_it = self.closed   # (by stop() or close() from another thread)
             self.close()   # (an error, Ctrl-C: the query ends on the server too)
-            if self._stopped and not isinstance(exc, (SLRError, StopIteration,
-                                                      KeyboardInterrupt)):
+            if self._failure is not None and not isinstance(exc, KeyboardInterrupt):
+                raise self._failure from None   # (the knowledge base closed under this call)
+            if closed_under_it and not isinstance(exc, (SLRError, StopIteration,
+                                                        KeyboardInterrupt)):
                 # (what a connection closed by stop() under this call raised)
                 raise SLRError(STOPPED_BY_CALLER) from None
             raise
@@ -1770,7 +1787,9 @@ class RemoteSolutions:
             raise ServiceUnavailable(f"the server sent no answer within {wait:g} s",
                                      status=0) from None
         except WebSocketException as exc:
-            if self._stopped:
+            if self._failure is not None:
+                raise self._failure from None    # (the knowledge base closed meanwhile)
+            if self._stopped or self.closed:     # (stop() or close() from another thread)
                 raise SLRError(STOPPED_BY_CALLER) from None
             raise ServiceUnavailable(f"the query's connection closed: {exc}",
                                      status=0) from None
@@ -1808,6 +1827,13 @@ class RemoteSolutions:
         """
         self._stopped = True
         self.close()
+
+    def _shut(self, failure: SLRError) -> None:
+        # the knowledge base closed: a query still open ends on the server, and this and
+        # every later next() raise ``failure`` (one that ended before is left as it is)
+        if not self.closed:
+            self._failure = failure
+            self.close()
 
     def close(self) -> None:
         """End the query (on the server too); later ``next()`` calls end the iteration.
