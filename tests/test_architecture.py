@@ -198,23 +198,30 @@ def _boundary_counts() -> tuple[dict[str, int], dict[str, int]]:
     return {rel: len(lines) for rel, lines in sql.items()}, calls
 
 
+def _assert_counts_within(found: dict, allowed: dict, grown_words: str, fewer: str) -> None:
+    """No file has more of a counted kind than ``allowed`` says (``grown_words`` names the
+    kind, ``{grown}`` the files), and none has fewer: a count that fell is lowered in
+    ``allowed``, so that it cannot grow back unseen."""
+    grown = {rel: n for rel, n in found.items() if n > allowed.get(rel, 0)}
+    assert not grown, grown_words.format(grown=grown)
+    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in allowed.items()
+              if found.get(rel, 0) < n}
+    assert not shrunk, f"{fewer} now: lower the allowance to {shrunk}"
+
+
 def test_sql_text_only_in_the_store_and_the_compilers():
     found, _ = _boundary_counts()
-    grown = {rel: n for rel, n in found.items() if n > SQL_TEXT_ALLOWED.get(rel, 0)}
-    assert not grown, (f"SQL text outside store/, sqlcompile/ and cep/sqlgen.py: {grown} "
-                       "(put the statement behind a store method, or a dialect printer)")
-    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in SQL_TEXT_ALLOWED.items()
-              if found.get(rel, 0) < n}
-    assert not shrunk, f"fewer SQL places now: lower SQL_TEXT_ALLOWED to {shrunk}"
+    _assert_counts_within(found, SQL_TEXT_ALLOWED,
+                          "SQL text outside store/, sqlcompile/ and cep/sqlgen.py: {grown} "
+                          "(put the statement behind a store method, or a dialect printer)",
+                          "fewer SQL places")
 
 
 def test_raw_statements_only_in_the_store_and_the_compilers():
     _, found = _boundary_counts()
-    grown = {rel: n for rel, n in found.items() if n > RAW_CALLS_ALLOWED.get(rel, 0)}
-    assert not grown, f"raw execute/executemany calls outside the store: {grown}"
-    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in RAW_CALLS_ALLOWED.items()
-              if found.get(rel, 0) < n}
-    assert not shrunk, f"fewer raw calls now: lower RAW_CALLS_ALLOWED to {shrunk}"
+    _assert_counts_within(found, RAW_CALLS_ALLOWED,
+                          "raw execute/executemany calls outside the store: {grown}",
+                          "fewer raw calls")
 
 
 # Every row a SQLite connection of the store reads goes through store/stored_text.py's
@@ -260,12 +267,10 @@ def test_the_stores_rows_are_read_through_stored_text():
             lines = _own_fetches(_tree(path))
             if lines:
                 found[rel] = len(lines)
-    grown = {rel: n for rel, n in found.items() if n > FETCHES_ALLOWED.get(rel, 0)}
-    assert not grown, (f"rows read past store/stored_text.py's fetch_rows/fetch_row: {grown} "
-                       "(a text that is no UTF-8 would fail the read)")
-    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in FETCHES_ALLOWED.items()
-              if found.get(rel, 0) < n}
-    assert not shrunk, f"fewer own fetches now: lower FETCHES_ALLOWED to {shrunk}"
+    _assert_counts_within(found, FETCHES_ALLOWED,
+                          "rows read past store/stored_text.py's fetch_rows/fetch_row: {grown} "
+                          "(a text that is no UTF-8 would fail the read)",
+                          "fewer own fetches")
 
 
 def test_the_check_of_own_fetches_sees_each_kind():
@@ -304,11 +309,9 @@ def _sqlite_only_lines() -> dict[str, int]:
 def test_engine_specific_sql_is_printed_by_a_dialect():
     found = _sqlite_only_lines()
     assert not any(rel.startswith(("sqlcompile/", "planner.py")) for rel in found), found
-    grown = {rel: n for rel, n in found.items() if n > SQLITE_ONLY_ALLOWED.get(rel, 0)}
-    assert not grown, f"SQLite-only SQL outside the dialects: {grown} (add a dialect printer)"
-    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in SQLITE_ONLY_ALLOWED.items()
-              if found.get(rel, 0) < n}
-    assert not shrunk, f"fewer SQLite-only places now: lower SQLITE_ONLY_ALLOWED to {shrunk}"
+    _assert_counts_within(found, SQLITE_ONLY_ALLOWED,
+                          "SQLite-only SQL outside the dialects: {grown} (add a dialect printer)",
+                          "fewer SQLite-only places")
 
 
 # ------------------------------------------------------------ private names stay private

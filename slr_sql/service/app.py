@@ -517,6 +517,17 @@ class _Service:
             engine.out = engine.err = DiscardedOutput()
 
     # -- plumbing -----------------------------------------------------------------------------
+    def check_websocket_token(self, websocket: WebSocket, request: dict, what: str) -> None:
+        """The token of a WebSocket's first message (its ``Authorization`` header, or the
+        message's ``token``) checked; a robot's token is refused ``what`` (a fleet robot
+        may only ship)."""
+        robot = self.check_token(
+            websocket.headers.get("authorization")
+            or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
+                else None))
+        if robot is not None:
+            raise _robot_may_not(robot, what)
+
     async def body(self, request: Request) -> dict:
         """The request's JSON object, read within the size and time limits."""
         limit = self.limits.max_body
@@ -749,12 +760,7 @@ class _Service:
         closing: list = []
         try:
             request = await self._first_message(websocket)
-            robot = self.check_token(
-                websocket.headers.get("authorization")
-                or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
-                    else None))
-            if robot is not None:
-                raise _robot_may_not(robot, "a subscription")
+            self.check_websocket_token(websocket, request, "a subscription")
             pattern, kwargs = _subscribe_request(request)
             batch = _batch_size(request)
             kwargs["max_queue"] = max(min(kwargs.get("max_queue", self.limits.subscribe_queue),
@@ -903,12 +909,7 @@ class _Service:
         self.solutions_open += 1
         try:
             request = await self._first_message(websocket, "solutions", '"goal": ...')
-            robot = self.check_token(
-                websocket.headers.get("authorization")
-                or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
-                    else None))
-            if robot is not None:
-                raise _robot_may_not(robot, "a query")
+            self.check_websocket_token(websocket, request, "a query")
             goal, options, timeout = _solutions_request(request)
             budget = _cap(timeout, self.limits.max_query_time)
             query = _StreamedQuery(self, goal, options, budget)

@@ -1540,12 +1540,7 @@ class RemoteSubscription:
             self._done = True
             raise ServiceUnavailable(f"the subscription's connection closed: {exc}",
                                      status=0) from None
-        try:
-            message = loads(data)
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise ServiceError(f"the server sent a message that is not JSON ({exc}): is the "
-                               "URL that of an slr serve?", kind="InternalError",
-                               status=0) from None
+        message = _server_message(data)
         if not isinstance(message, dict):
             raise ServiceError("the server sent a message that is not an object",
                                kind="InternalError", status=0)
@@ -1663,6 +1658,16 @@ class RemoteSubscription:
 
     def __exit__(self, exc_type: Any, *rest: Any) -> None:
         self.close(ack=exc_type is None)
+
+
+def _server_message(data: str | bytes) -> Any:
+    """A WebSocket message of the server, parsed (a ServiceError for one that is no JSON)."""
+    try:
+        return loads(data)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ServiceError(f"the server sent a message that is not JSON ({exc}): is the "
+                           "URL that of an slr serve?", kind="InternalError",
+                           status=0) from None
 
 
 class RemoteSolutions:
@@ -1793,12 +1798,7 @@ class RemoteSolutions:
                 raise SLRError(STOPPED_BY_CALLER) from None
             raise ServiceUnavailable(f"the query's connection closed: {exc}",
                                      status=0) from None
-        try:
-            message = loads(data)
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise ServiceError(f"the server sent a message that is not JSON ({exc}): is the "
-                               "URL that of an slr serve?", kind="InternalError",
-                               status=0) from None
+        message = _server_message(data)
         kind = message.get("type") if isinstance(message, dict) else None
         if kind == "answer":
             return decode_answers([message.get("answer", {})])[0]
