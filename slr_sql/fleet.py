@@ -802,6 +802,29 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
     return out
 
 
+def _utc(seconds: float) -> str:
+    """A time of ``slr fleet``'s output: seconds since the epoch as UTC, to the second."""
+    return time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(seconds))
+
+
+def _status_cells(r: dict[str, Any]) -> tuple[str, ...]:
+    """The cells of one robot's line of ``slr fleet status``: a retired robot's, a relayed
+    robot's (no contact of its own), or one that ships here itself."""
+    # (names checked when they came in; a fleet file edited by hand may hold others)
+    name, shipped = printable_name(r["robot"]), str(r["shipped"])
+    via = None if r.get("via") is None else f"relayed via {printable_name(r['via'])}"
+    if r.get("retired_at") is not None:
+        return (name, shipped, "-", "-",
+                f"retired {_utc(r['retired_at'])}" + ("" if via is None else f", {via}"))
+    if via is not None:
+        return (name, shipped, "-", "-", via)
+    return (name, shipped,
+            "-" if r["pending"] is None else str(r["pending"]),
+            "-" if r["lag_seconds"] is None else f"{r['lag_seconds']:.3f}",
+            "never" if r["last_contact"] is None else
+            f"{_utc(r['last_contact'])} ({r['since_contact']:.0f} s ago)")
+
+
 def _on_fleet_store(fleet: str, token: str | None, local: Callable[[Any], _T],
                     remote: Callable[[Any], _T]) -> _T:
     """``remote(client)`` when ``fleet`` is the URL of `slr serve`, else ``local(kb)`` on the
@@ -949,23 +972,7 @@ def click_group() -> Any:
             click.echo("no robot has shipped to this store")
             return
         header = ("robot", "shipped", "lag events", "lag s", "last contact")
-        table = [header] + [
-            # (names checked when they came in; a fleet file edited by hand may hold others)
-            (printable_name(r["robot"]), str(r["shipped"]), "-", "-",
-             "retired " + time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["retired_at"]))
-             + " UTC" + (f", relayed via {printable_name(r['via'])}"
-                         if r.get("via") is not None else ""))
-            if r.get("retired_at") is not None else
-            (printable_name(r["robot"]), str(r["shipped"]), "-", "-",
-             f"relayed via {printable_name(r['via'])}")
-            if r.get("via") is not None else
-            (printable_name(r["robot"]), str(r["shipped"]),
-             "-" if r["pending"] is None else str(r["pending"]),
-             "-" if r["lag_seconds"] is None else f"{r['lag_seconds']:.3f}",
-             "never" if r["last_contact"] is None else
-             time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["last_contact"]))
-             + f" UTC ({r['since_contact']:.0f} s ago)")
-            for r in rows]
+        table = [header] + [_status_cells(r) for r in rows]
         widths = [max(len(row[i]) for row in table) for i in range(len(header))]
         for row in table:
             click.echo("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
@@ -979,14 +986,14 @@ def click_group() -> Any:
         marks stop waiting for it and may rise; its events stay; its shipments are refused
         until `slr fleet reinstate`. Over `slr serve`, with the server's own token."""
         done = retire(fleet, robot, token=token_of(ctx))
-        when = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(done["retired_at"]))
+        when = _utc(done["retired_at"])
         name = printable_name(done["robot"])
         if done["already"]:
-            click.echo(f"robot {name} was retired already ({when} UTC); nothing changed")
+            click.echo(f"robot {name} was retired already ({when}); nothing changed")
             return
         raised = ", ".join(f"{printable_name(mk)} to {t:g}"
                            for mk, t in sorted(done["raised"].items()))
-        click.echo(f"robot {name} retired ({when} UTC); the fleet's marks "
+        click.echo(f"robot {name} retired ({when}); the fleet's marks "
                    + (f"rose: {raised}" if raised else "did not move"))
 
     @fleet_group.command("reinstate")
