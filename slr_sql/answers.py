@@ -158,10 +158,16 @@ def value_text(value: Any, digits: int | None = None) -> str:
 def answer_text(answer: dict[str, Any]) -> str:
     """One answer as the Prolog top level prints it, on one line: ``X = a, Y = [1,2]``.
 
-    An answer without variables (a goal that just succeeds) is ``true``.
+    An answer without variables (a goal that just succeeds) is ``true``. Variables the
+    query did not name are printed as SWI-Prolog's top level prints them: ``_`` where the
+    answer holds one only once, ``_A``, ``_B``, ... where it holds one more than once.
 
     >>> answer_text({"X": 1, "L": [1, 2]}), answer_text({})
     ('X = 1, L = [1,2]', 'true')
+    >>> from slr_sql.terms import Struct, Var
+    >>> shared, other = Var(), Var()
+    >>> answer_text({"X": Struct("f", (shared, shared, other)), "L": [other, Var()]})
+    'X = f(_A,_A,_B), L = [_B,_]'
     """
     from .terms import Var
 
@@ -170,4 +176,61 @@ def answer_text(answer: dict[str, Any]) -> str:
              if not (isinstance(value, Var) and str(value) == name)]
     if not shown:
         return "true"
+    shown = _fresh_variables_named(shown, taken=set(answer))
     return ", ".join(f"{name} = {value_text(value)}" for name, value in shown)
+
+
+# the name the engine gives a variable no clause or query named (terms.Var)
+_FRESH_NAME = re.compile(r"_G\d+\Z")
+
+
+def _fresh_variables_named(shown: list[tuple[str, Any]],
+                           taken: set[str]) -> list[tuple[str, Any]]:
+    """``shown`` with each unnamed variable renamed as SWI-Prolog's top level names it, in
+    the order they are printed: ``_`` for one that occurs once, else the next of ``_A``,
+    ``_B``, ... (``_A1`` after ``_Z``) that no variable of the answer is named already."""
+    from .terms import Struct, Var
+
+    order: list[str] = []
+    counts: dict[str, int] = {}
+    todo: list[Any] = [value for _, value in reversed(shown)]
+    while todo:               # (iterative: an answer may be nested deeper than recursion)
+        item = todo.pop()
+        if isinstance(item, Var):
+            name = item.name
+            if _FRESH_NAME.match(name):
+                if name not in counts:
+                    counts[name] = 0
+                    order.append(name)
+                counts[name] += 1
+            else:
+                taken.add(name)
+        elif isinstance(item, Struct):
+            todo.extend(reversed(item.args))
+        elif isinstance(item, (list, tuple)):
+            todo.extend(reversed(item))
+    if not order:
+        return shown
+    renamed: dict[str, Var] = {}
+    letters = (f"_{chr(65 + n % 26)}{n // 26 or ''}" for n in range(1 << 30))
+    for name in order:
+        if counts[name] == 1:
+            renamed[name] = Var("_")
+            continue
+        new = next(letters)
+        while new in taken:
+            new = next(letters)
+        renamed[name] = Var(new)
+
+    def split(item: Any) -> tuple[Any, Any]:
+        if isinstance(item, Var):
+            return None, renamed.get(item.name, item)
+        if isinstance(item, Struct):
+            return item.args, lambda args, name=item.name: Struct(name, tuple(args))
+        if isinstance(item, list):
+            return item, list
+        if isinstance(item, tuple):
+            return item, tuple
+        return None, item
+
+    return [(name, rebuilt(value, split)) for name, value in shown]
