@@ -27,7 +27,8 @@ from .api import KnowledgeBaseAPI
 from .answers import answer_text, rebuilt, value_text
 from .encoding import decode
 from .arguments import check_time_option
-from .kb import KnowledgeBase
+from .errors import STOPPED_BY_CALLER
+from .kb import KnowledgeBase, Solutions
 from .parser import full_stop_end, parse_event_fast, parse_indicator
 from .printable import printable_name, printable_syntax_error, printable_text
 from .arguments import refuse_memory_store
@@ -1329,6 +1330,8 @@ class Shell:
         self.pending: list[str] = []
         self.consulted: list[str] = []
         self.state = ShellState.READY
+        self.running: Any = None      # the answers whose next one is looked for now
+        self.signalled = False        # stop_goal stopped them (a Ctrl-C)
 
     @property
     def continuing(self) -> bool:
@@ -1338,6 +1341,29 @@ class Shell:
     def prompt(self) -> str:
         return {ShellState.READY: "?- ", ShellState.CONTINUING: "   | ",
                 ShellState.CONSULTING: "|: "}[self.state]
+
+    def stop_goal(self) -> bool:
+        """(In the shell's SIGINT handler, a goal running) Whether the search for the goal's
+        next answer on a local store was stopped: then the handler raises nothing, and that
+        ``next()`` raises KeyboardInterrupt as the stop ends it (:meth:`_one_at_a_time`) --
+        the interpreter at its next check, a statement compiled to SQL at once. Raised by the
+        handler, the KeyboardInterrupt did not reach a statement SQLite runs (an exception
+        raised in its progress handler is cleared: the goal went on in the interpreter, and
+        Ctrl-C did nothing), and one raised inside psycopg's wait for the server could leave
+        the connection with its statement unread ("another command is already in
+        progress"). False (the handler raises) for a served goal's answers, which end with
+        the KeyboardInterrupt itself, outside the search (the key after an answer), and for
+        a second Ctrl-C.
+
+        >>> shell = Shell(slr_sql.open(), ask=lambda: ";"); shell.stop_goal()   # none runs
+        False
+        """
+        answers = self.running
+        if not isinstance(answers, Solutions) or self.signalled:
+            return False
+        self.signalled = True
+        answers.stop()
+        return True
 
     def interrupt(self) -> None:
         """Ctrl-C at the prompt: drop the unfinished goal (a consult keeps what it has)."""
@@ -1567,7 +1593,18 @@ class Shell:
     def _one_at_a_time(self, answers: Iterator[dict[str, Any]]) -> None:
         """SWI-Prolog's way: an answer, then the key pressed decides: the next or stop."""
         try:
-            for answer in answers:
+            while True:
+                self.running = answers   # (while it looks for an answer: stop_goal)
+                try:
+                    answer = next(answers)
+                except StopIteration:
+                    break
+                except slr_sql.SLRError as exc:
+                    if self.signalled and str(exc) == STOPPED_BY_CALLER:
+                        raise KeyboardInterrupt from None   # (the Ctrl-C that stopped it)
+                    raise
+                finally:
+                    self.running = None
                 shown = {k: abbreviated(v) for k, v in answer.items()}
                 self.echo(answer_text(shown) if answer else "true", nl=False)
                 while True:
@@ -1586,6 +1623,7 @@ class Shell:
                 return
             self.echo("false.")
         finally:
+            self.signalled = False
             close = getattr(answers, "close", None)
             if close is not None:
                 close()
@@ -1868,7 +1906,8 @@ class ShellInterrupts:
     runs, turned a Ctrl-C there into a cancelled prompt: the line typed was dropped without
     a word). Installed for the whole shell (so asyncio installs none), this handler
 
-    * raises KeyboardInterrupt while a line is handled (the goal stops);
+    * raises KeyboardInterrupt while a line is handled (the goal stops), unless it stopped
+      the search for a local goal's next answer (``stop_goal``), which then raises it;
     * before the editor started (between two lines: a SIGINT sent with kill), keeps it for
       the editor, which takes it as its Ctrl-C key once it runs (raised there, it escaped
       the shell's loop, which had not reached the editor's call);
@@ -1883,7 +1922,9 @@ class ShellInterrupts:
     it started, it gets the request once it runs; otherwise (a goal, the wait for the key
     after an answer, whose raw mode ends as the exception leaves it) it is raised at once.
 
-    ``app``: the editor's prompt_toolkit Application.
+    ``app``: the editor's prompt_toolkit Application; ``stop_goal``: asked first when a
+    SIGINT comes while a goal runs (:meth:`Shell.stop_goal`): True, the goal's search was
+    stopped and ends by itself, so nothing is raised.
 
     >>> gate = ShellInterrupts(app=None); gate.editing(); gate.take()
     False
@@ -1892,8 +1933,9 @@ class ShellInterrupts:
     EDITING = "editing"    # inside the line editor's call, from before its prompt to after
     RUNNING = "running"    # a line is handled: Ctrl-C stops the goal
 
-    def __init__(self, app: Any):
+    def __init__(self, app: Any, stop_goal: Callable[[], bool] | None = None):
         self.app = app
+        self.stop_goal = stop_goal
         self.state = self.EDITING
         self.started = False       # whether the editor ran for this line
         self.after_enter = False   # a Ctrl-C came after the editor took the line
@@ -1902,6 +1944,8 @@ class ShellInterrupts:
 
     def __call__(self, signum: int, frame: Any) -> None:
         if self.state == self.RUNNING:
+            if self.stop_goal is not None and self.stop_goal():
+                return   # (the goal's search ends by the stop, in words of an interrupt)
             raise KeyboardInterrupt
         if not self.started:
             self.before_editor = True
@@ -1994,7 +2038,7 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
     """
     import signal
 
-    gate = ShellInterrupts(prompt.app)
+    gate = ShellInterrupts(prompt.app, session.stop_goal)
 
     def terminate(signum: int, frame: Any) -> None:
         if on_terminate is not None:

@@ -629,6 +629,14 @@ class KnowledgeBase:
                             found = None
                     if found is not None:
                         return answers
+        return self._answers(goal, at, args, timeout, max_steps, limit, robot)
+
+    def _answers(self, goal: str, at: float | None, args: dict | None,
+                 timeout: float | None, max_steps: int | None, limit: int | None,
+                 robot: str | None, stop: threading.Event | None = None) -> list[dict[str, Any]]:
+        """:meth:`query`'s answers past its fast path (the options checked); ``stop``: the
+        query's, of :meth:`solutions` (ends the compiled statement or the interpreter under
+        way)."""
         self._refresh()
         plan = self.plans.plan(goal, tuple(args) if args else ())
         if limit == 0:
@@ -644,12 +652,13 @@ class KnowledgeBase:
         if max_steps is None and self.sql_enabled:  # the compiled SQL plan, if any
             from .planner import try_sql
             deadline = time.monotonic() + timeout if timeout is not None else None
-            answers = try_sql(self, plan, args, at, limit, deadline, robot)
+            answers = try_sql(self, plan, args, at, limit, deadline, robot, stop)
             if answers is not None:
                 return answers
         term, frame = instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
         m.robot = robot
+        m.stop = stop
         answers = []
         names = plan.names
         for _ in m.solve(term):
@@ -673,7 +682,8 @@ class KnowledgeBase:
         [{'X': 1}, {'X': 2}, {'X': 3}]
         """
         stop = threading.Event()
-        return Solutions(self._solutions(goal, at, args, timeout, robot, stop), stop)
+        return Solutions(self._solutions(goal, at, args, timeout, robot, stop), stop,
+                         self.store.stop_query)
 
     def _solutions(self, goal: str, at: float | None, args: dict | None,
                    timeout: float | None, robot: str | None,
@@ -690,8 +700,9 @@ class KnowledgeBase:
         if plan.lookup is not None or (self.sql_enabled
                                        and type(plan_for(self, plan, at is not None))
                                        is not Fallback):
-            # A compiled plan answers as one statement: all its answers at once.
-            yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+            # A compiled plan answers as one statement: all its answers at once (a stop
+            # ends that statement: the store interrupts or cancels it)
+            yield from _answers_of_query(self, goal, at, args, timeout, None, None, robot, stop)
             return
         term, frame = instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout)
@@ -1303,11 +1314,15 @@ class Solutions:
     an iterator of answer dicts, computed as they are asked for.
 
     ``close()`` ends it between two answers (what the goal still holds is let go);
-    ``stop()``, from any thread, ends the search for an answer under way: the interpreter
-    raises :class:`SLRError` (``STOPPED_BY_CALLER``) at its next check of limits (every few
-    thousand inference steps), and a later ``next()`` raises it at once. ``slr serve``
-    stops a query so when its client asks to stop or leaves (docs/service.md, "Answers one
-    at a time"). A compiled statement is not stopped: it ends at its timeout.
+    ``stop()``, from any thread, ends the search for an answer under way with
+    :class:`SLRError` (``STOPPED_BY_CALLER``), and a later ``next()`` raises it at once: the
+    interpreter at its next check of limits (every few thousand inference steps), a goal
+    compiled to one SQL statement (or a compiled sub-goal the interpreter runs) at once --
+    SQLite's progress handler of that statement interrupts it (it looks every 20,000
+    instructions), PostgreSQL's server is sent a cancel of that statement, again until it
+    ended. Only that query's statement ends: the store is unchanged, and its connection
+    answers the next query. ``slr serve`` stops a query so when its client asks to stop or
+    leaves (docs/service.md, "Answers one at a time").
 
     >>> kb = open()
     >>> answers = kb.solutions("between(1, inf, X)")
@@ -1320,9 +1335,12 @@ class Solutions:
     >>> kb.close()
     """
 
-    def __init__(self, answers: Iterator[dict[str, Any]], stop: threading.Event):
+    def __init__(self, answers: Iterator[dict[str, Any]], stop: threading.Event,
+                 stop_statement: Callable[[threading.Event], None]):
         self._answers = answers
         self._stop = stop
+        # (the store's stop_query: ends the statement of this query the server runs now)
+        self._stop_statement = stop_statement
         self._closed = False
 
     def __iter__(self) -> "Solutions":
@@ -1336,25 +1354,29 @@ class Solutions:
         return next(self._answers)
 
     def stop(self) -> None:
-        """End the search for the next answer (see the class's text); thread-safe."""
+        """End the search for the next answer (see the class's text); thread-safe, and it
+        never waits (the service calls it on its event loop)."""
         self._stop.set()
+        self._stop_statement(self._stop)
 
     def close(self) -> None:
         """End the iteration: later ``next()`` calls raise StopIteration. From another thread
         while a ``next()`` looks for an answer, that search ends as :meth:`stop` ends it."""
         self._closed = True
-        self._stop.set()    # (what a next() under way in another thread checks)
+        self.stop()    # (what a next() under way in another thread checks)
         try:
             self._answers.close()
         except ValueError:
             pass   # (that next() is running the generator: the stop ends it there)
 
 
-def _boundary(method: Callable) -> Callable:
+def _boundary(method: Callable, where: str | None = None) -> Callable:
     """The facade's promise, kept at its edge: whatever goes wrong below (a check a layer
     lacks, a Python error inside a user's ``define``d predicate, a damaged file), the caller
-    gets an :class:`SLRError` in words, never a raw Python or SQLite exception."""
-    where = "open" if method.__name__ == "__init__" else method.__name__
+    gets an :class:`SLRError` in words, never a raw Python or SQLite exception. ``where``:
+    the name its messages start with (default: the method's)."""
+    if where is None:
+        where = "open" if method.__name__ == "__init__" else method.__name__
 
     @functools.wraps(method)
     def guarded(*args: Any, **kwargs: Any) -> Any:
@@ -1404,6 +1426,8 @@ for _name in ("__init__", "close", "load", "unload", "programs", "load_file", "d
     if hasattr(KnowledgeBase, _name):
         setattr(KnowledgeBase, _name, _boundary(getattr(KnowledgeBase, _name)))
 del _name
+# the answers of a compiled plan that solutions() gives, in query()'s words
+_answers_of_query = _boundary(KnowledgeBase._answers, "query")
 
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:

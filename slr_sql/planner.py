@@ -298,9 +298,10 @@ class SqlPlan:
         return any(store.event_table_sql(n, a) is not None for n, a in self.missing)
 
     def _rows(self, kb, values: dict, at, limit, deadline, robot=None,
-              instructions=None) -> list:
+              instructions=None, stop=None) -> list:
         """Bind the parameters (``values``: answer variable name -> term), run the guards,
-        then the statement."""
+        then the statement. ``stop``: the query's (``Solutions.stop()`` ends the statement
+        under way)."""
         params = self.params
         dialect = kb.store.dialect
         if self.arg_params or self.has_at or self.has_robot:
@@ -339,11 +340,11 @@ class SqlPlan:
                 sql, guards = self._with_long_texts(long)
         for guard in guards:
             kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True,
-                                  instructions=instructions)
+                                  instructions=instructions, stop=stop)
         if sql is None:
             return []
         rows = kb.store.run_compiled(sql, params, limit, deadline, may_fall_back=True,
-                                     instructions=instructions)
+                                     instructions=instructions, stop=stop)
         from_column = dialect.from_column
         if from_column is not None:   # answer columns are the columns' text there
             rows = [(row[0],) + tuple([from_column(v) for v in row[1:]]) for row in rows]
@@ -362,9 +363,9 @@ class SqlPlan:
             texts = self._long_texts[long] = (swap(self.sql), tuple(map(swap, self.guards)))
         return texts
 
-    def run(self, kb, args, at, limit, deadline=None, robot=None):
+    def run(self, kb, args, at, limit, deadline=None, robot=None, stop=None):
         values = {name: from_python(args[name]) for name in self.arg_params}
-        rows = self._rows(kb, values, at, limit, deadline, robot)
+        rows = self._rows(kb, values, at, limit, deadline, robot, stop=stop)
         recipes = self.recipes
         out = []
         for row in rows:
@@ -394,14 +395,17 @@ class SqlPlan:
             out.append((key, t))
         return out
 
-    def term_rows(self, kb, bound: dict, at, deadline=None, instructions=None) -> list:
+    def term_rows(self, kb, bound: dict, at, deadline=None, instructions=None,
+                  stop=None) -> list:
         """The answers as terms, for an interpreter that called the goal: per row, the
         ``(name, term)`` pairs of the answer variables that are bound (fresh variables for
         the unbound parts of non-ground answers, shared within the row). ``instructions``:
-        each statement's budget of SQLite instructions (``run_compiled``)."""
+        each statement's budget of SQLite instructions (``run_compiled``); ``stop``: the
+        interpreter's (its query's ``Solutions.stop()``)."""
         recipes = self.recipes
         out = []
-        for row in self._rows(kb, bound, at, None, deadline, instructions=instructions):
+        for row in self._rows(kb, bound, at, None, deadline, instructions=instructions,
+                              stop=stop):
             varmap: dict = {}
             vals = []
             for name, how, data in recipes[row[0]]:
@@ -653,10 +657,11 @@ def compiles_for(store) -> bool:
     return hasattr(store.dialect, "list_of")
 
 
-def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None):
+def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None, stop=None):
     """Answers through SQL, or None when the interpreter must answer. Past ``deadline``
-    (``time.monotonic()``) the statement stops with SLRTimeout. ``robot``: only that
-    robot's events.
+    (``time.monotonic()``) the statement stops with SLRTimeout; once ``stop`` (a
+    ``threading.Event``: the query's, which ``Solutions.stop()`` sets) is set, with SLRError
+    ``STOPPED_BY_CALLER``. ``robot``: only that robot's events.
 
     >>> import slr_sql
     >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
@@ -673,7 +678,7 @@ def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None):
     if type(entry) is Fallback:
         return None
     try:
-        return entry.run(kb, args or {}, at, limit, deadline, robot)
+        return entry.run(kb, args or {}, at, limit, deadline, robot, stop)
     except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError,
             MemoryError, RecursionError):
         # (a defined predicate called from SQL that runs out of memory surfaces here as
@@ -920,7 +925,7 @@ class CompiledCall:
         if type(entry) is Fallback:
             return None
         try:
-            rows = entry.term_rows(kb, terms, m.at, m.deadline)
+            rows = entry.term_rows(kb, terms, m.at, m.deadline, stop=m.stop)
         except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
             return None
         self.answered += 1

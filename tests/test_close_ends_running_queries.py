@@ -371,3 +371,89 @@ def test_a_close_cancels_a_querys_statement_never_the_write_after_it(postgres_ur
                                  and str(error) == "the event store is closed"), repr(error)
         assert admin.execute("SELECT count(*) FROM p WHERE arg1 = '1000'").fetchone()[0] == \
             (0 if error else 1)
+
+
+# -- Solutions.stop(): one query's statement, the knowledge base open ---------------------
+
+STOPPED = "the query was stopped while it looked for its next answer"
+
+
+@pytest.mark.parametrize("goal", ["slow", "findall(x, slow, L)"],
+                         ids=["a compiled goal", "a compiled sub-goal"])
+def test_stop_ends_the_compiled_statement_of_its_query_and_the_store_answers_the_next(
+        backend, goal, caplog):
+    """`solutions(...).stop()` from another thread ended the interpreter's search, but a goal
+    compiled to one statement (or a compiled sub-goal the interpreter called) ran on to its
+    timeout (120 s here), holding the store's connection. Its statement is now interrupted
+    (SQLite) or cancelled (PostgreSQL): the query ends with the interpreter's words, the
+    store is unchanged, and its connection answers the next query at once."""
+    kb, started = _slow_store(backend)
+    with kb:
+        pid = _store_pid(kb)
+        answers = kb.solutions(goal, timeout=120)
+        outcome: list = []
+        ended = threading.Event()
+
+        def ask() -> None:
+            try:
+                outcome.append(next(answers))
+            except BaseException as exc:   # (asserted on below)
+                outcome.append(exc)
+            ended.set()
+
+        # (a daemon thread: without the fix the statement runs on past the test's wait)
+        threading.Thread(target=ask, daemon=True).start()
+        _wait_until_running(backend, pid, started, ended)
+        answers.stop()
+        assert ended.wait(DEADLINE), "the statement ran on after the stop"
+        [error] = outcome
+        assert type(error) is slr_sql.SLRError and str(error) == STOPPED, repr(error)
+        with pytest.raises(slr_sql.SLRError, match=f"^{STOPPED}$"):
+            next(answers)
+        assert kb.query("p(X)^_, X > 498", timeout=DEADLINE) == [{"X": 499}]
+        assert kb.query("findall(X, p(X)^_, L), length(L, N)")[0]["N"] == EVENTS
+        assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")
+                    or r.exc_info], caplog.text
+
+
+def test_a_served_query_stopped_by_its_client_frees_the_server_at_once(backend, tmp_path):
+    """The client's `stop()` of a served query (its WebSocket closed: `slr shell URL`'s
+    Ctrl-C, a client that leaves) stopped the server's search, but a compiled statement ran
+    on, holding the store, until --max-query-time (120 s here): the server's next query
+    waited for it. It now ends with the stop, and the server answers the next query."""
+    from service_helpers import HTTP, ServiceProcess
+
+    _slow_store(backend, signalled=False)[0].close()
+    with ServiceProcess(backend, "--max-query-time", "120", log=tmp_path / "server.log") \
+            as served, slr_sql.connect(served.url) as client:
+        answers = client.solutions("slow")
+        outcome: list = []
+        ended = threading.Event()
+
+        def ask() -> None:
+            try:
+                outcome.append(next(answers))
+            except BaseException as exc:   # (asserted on below)
+                outcome.append(exc)
+            ended.set()
+
+        threading.Thread(target=ask, daemon=True).start()
+        deadline = time.monotonic() + DEADLINE
+        while HTTP.get(served.url + "/health").json()["queries"]["running"] == 0:
+            assert time.monotonic() < deadline, "the query is not counted running"
+        answers.stop()
+        assert ended.wait(DEADLINE)
+        [error] = outcome
+        assert type(error) is slr_sql.SLRError and str(error) == STOPPED, repr(error)
+        began = time.monotonic()
+        answer = HTTP.post(served.url + "/query", json={"goal": "p(X)^_, X > 498"},
+                           timeout=DEADLINE)
+        assert answer.status_code == 200 and answer.json()["answers"] == [{"X": 499}]
+        assert time.monotonic() - began < DEADLINE
+        while True:   # (the stopped query's slot is given back on the server's event loop)
+            queries = HTTP.get(served.url + "/health").json()["queries"]
+            if queries["running"] == 0 and queries["solutions"] == 0:
+                break
+            assert time.monotonic() < began + DEADLINE, queries
+    log = served.log.read_text()
+    assert "Traceback" not in log and "Exception in ASGI" not in log, log

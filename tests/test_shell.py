@@ -90,6 +90,63 @@ def leave(child: pexpect.spawn) -> None:
     assert child.exitstatus == 0
 
 
+def _wait_until_its_statement_runs(child: pexpect.spawn, where: str) -> None:
+    """Until the shell's goal is inside its long statement (up to a deadline): on SQLite,
+    once the shell's process has spent 0.3 s of CPU after this call (planning the statement
+    takes milliseconds; a Ctrl-C before it starts stops the interpreter, which is another
+    test's); on PostgreSQL, once the server shows another session of the database active
+    for 100 ms."""
+    deadline = time.monotonic() + 30
+
+    def cpu_ticks() -> int:
+        fields = Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return int(fields[11]) + int(fields[12])   # utime + stime
+
+    if not where.startswith("postgresql:"):
+        began, needed = cpu_ticks(), 0.3 * os.sysconf("SC_CLK_TCK")
+        while cpu_ticks() - began < needed:
+            assert time.monotonic() < deadline, "the statement did not run"
+            child.expect([pexpect.TIMEOUT], timeout=0.02)
+        return
+    import psycopg
+    active = ("SELECT count(*) FROM pg_stat_activity WHERE datname = current_database() "
+              "AND pid <> pg_backend_pid() AND state = 'active' "
+              "AND clock_timestamp() - query_start > interval '100 milliseconds'")
+    with psycopg.connect(where, autocommit=True) as admin:
+        while not admin.execute(active).fetchone()[0]:
+            assert time.monotonic() < deadline, "the statement did not run"
+            child.expect([pexpect.TIMEOUT], timeout=0.02)
+
+
+def test_ctrl_c_stops_a_goal_compiled_to_sql_and_the_store_answers_the_next(backend):
+    """Ctrl-C during a goal's statement compiled to SQL (here a compiled sub-goal the
+    interpreter calls, a minute or more of the engine's work) did nothing on SQLite: the
+    KeyboardInterrupt, raised in SQLite's progress handler, was cleared there, and the goal
+    went on in the interpreter. The shell now stops the goal's query instead: the statement
+    ends (interrupted on SQLite, cancelled on PostgreSQL, whose connection is left ready:
+    a KeyboardInterrupt inside psycopg's wait could leave it "another command is already in
+    progress"), and the next goal is answered."""
+    from test_close_ends_running_queries import _slow_store
+
+    _slow_store(backend, signalled=False)[0].close()
+    child = spawn_shell(backend)
+    # (its statement compiled first, so that it starts as soon as `started` is written)
+    child.sendline("explain slow.")
+    child.expect("engine: sql")
+    child.expect(PROMPT)
+    child.sendline("write(started), nl, slow.")
+    child.expect("started\r\n")
+    _wait_until_its_statement_runs(child, backend)
+    interrupt_the_goal(child)
+    child.expect("% interrupted", timeout=30)
+    child.expect(PROMPT)
+    child.sendline("p(X)^_, X > 498.")
+    child.expect("X = 499")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
 def test_ctrl_c_stops_a_long_goal_and_gives_the_prompt_back(store):
     child = spawn_shell(store)
     # the goal says it runs: the echo of the line is no proof (a Ctrl-C sent as the prompt

@@ -1538,8 +1538,8 @@ class RemoteSubscription:
             if self._done:             # close() was called (maybe from another thread)
                 return {"type": "end"}
             self._done = True
-            raise ServiceUnavailable(f"the subscription's connection closed: {exc}",
-                                     status=0) from None
+            raise ServiceUnavailable(f"the subscription's connection closed: "
+                                     f"{_closed_words(exc)}", status=0) from None
         message = _server_message(data)
         if not isinstance(message, dict):
             raise ServiceError("the server sent a message that is not an object",
@@ -1658,6 +1658,54 @@ class RemoteSubscription:
 
     def __exit__(self, exc_type: Any, *rest: Any) -> None:
         self.close(ack=exc_type is None)
+
+
+# What a WebSocket close code of the server means, in words (RFC 6455 and IANA's codes; the
+# service closes with 1000 when done, 1012 when it stops, 4000 + status after an error)
+_CLOSE_CODE_WORDS = {
+    1000: "the server ended it",
+    1001: "the server went away",
+    1002: "the server found an error in the WebSocket protocol",
+    1003: "the server refused data of that kind",
+    1007: "the server refused data that was not valid",
+    1008: "the server refused it by its policy",
+    1009: "the server refused a message too large",
+    1011: "the server failed (an internal error)",
+    1012: "the server stopped or restarted; ask again once it is back",
+    1013: "the server is overloaded; try again later",
+    1014: "a gateway in front of the server got no valid answer from it",
+}
+
+
+def _closed_words(exc: BaseException) -> str:
+    """Why a WebSocket to the server closed, in words (``exc``: what websockets raised),
+    its close code kept in parentheses; not websockets' "received 1012 (service restart);
+    then sent 1012 (service restart)".
+
+    >>> from websockets.exceptions import ConnectionClosedError, ConnectionClosedOK
+    >>> from websockets.frames import Close
+    >>> print(_closed_words(ConnectionClosedError(Close(1012, ""), Close(1012, ""), True)))
+    the server stopped or restarted; ask again once it is back (WebSocket close code 1012)
+    >>> print(_closed_words(ConnectionClosedError(None, None)))
+    the connection to the server broke without a closing handshake (the server was killed, or the network failed)
+    >>> print(_closed_words(ConnectionClosedOK(Close(4503, "busy"), None)))
+    the server closed it with code 4503 (its reason: 'busy')
+    """
+    from websockets.exceptions import ConnectionClosed
+
+    if not isinstance(exc, ConnectionClosed):
+        return str(exc)
+    received = exc.rcvd
+    if received is None:
+        return ("the connection to the server broke without a closing handshake (the "
+                "server was killed, or the network failed)")
+    code, reason = received.code, received.reason
+    words = _CLOSE_CODE_WORDS.get(code)
+    if words is None:
+        return f"the server closed it with code {code}" + (
+            f" (its reason: {shown(reason)})" if reason else "")
+    return f"{words} (WebSocket close code {code}" + (
+        f"; its reason: {shown(reason)})" if reason else ")")
 
 
 def _server_message(data: str | bytes) -> Any:
@@ -1796,7 +1844,7 @@ class RemoteSolutions:
                 raise self._failure from None    # (the knowledge base closed meanwhile)
             if self._stopped or self.closed:     # (stop() or close() from another thread)
                 raise SLRError(STOPPED_BY_CALLER) from None
-            raise ServiceUnavailable(f"the query's connection closed: {exc}",
+            raise ServiceUnavailable(f"the query's connection closed: {_closed_words(exc)}",
                                      status=0) from None
         message = _server_message(data)
         kind = message.get("type") if isinstance(message, dict) else None

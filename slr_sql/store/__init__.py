@@ -46,6 +46,7 @@ other threads left open (they resume after it, from where they were).
 from __future__ import annotations
 
 import math
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -287,6 +288,10 @@ class EventStore:
     @_doc(Database.stop_queries)
     def stop_queries(self) -> None:
         self._db.stop_queries()
+
+    @_doc(Database.stop_query)
+    def stop_query(self, stop: threading.Event) -> None:
+        self._db.stop_query(stop)
 
     @_doc(Database.close)
     def close(self) -> None:
@@ -972,9 +977,10 @@ class EventStore:
     @_doc(Database.run_compiled)
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None, may_fall_back: bool = False,
-                     instructions: int | None = None) -> list[tuple]:
+                     instructions: int | None = None,
+                     stop: threading.Event | None = None) -> list[tuple]:
         return self._db.run_compiled(sql, params, limit, deadline, may_fall_back,
-                                     instructions)
+                                     instructions, stop)
 
     @_doc(Database.run_compiled_many)
     def run_compiled_many(self, sql: str, rows: list) -> None:

@@ -16,6 +16,7 @@ True
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager
 from typing import Any, Protocol, runtime_checkable
@@ -191,6 +192,8 @@ class Backend(Protocol):
 
     def stop_queries(self) -> None: ...
 
+    def stop_query(self, stop: threading.Event) -> None: ...
+
     def close(self) -> None: ...
 
     @property
@@ -357,7 +360,7 @@ class CompiledSQL(Protocol):
     @property
     def statement_deadline(self) -> float | None: ...
 
-    def run_compiled(self, sql: str, params: dict[Any, Any], limit: int | None=None, deadline: float | None=None, may_fall_back: bool=False, instructions: int | None=None) -> list[tuple[Any, ...]]: ...
+    def run_compiled(self, sql: str, params: dict[Any, Any], limit: int | None=None, deadline: float | None=None, may_fall_back: bool=False, instructions: int | None=None, stop: threading.Event | None=None) -> list[tuple[Any, ...]]: ...
 
     def run_compiled_many(self, sql: str, rows: list[Any]) -> None: ...
 

@@ -37,7 +37,8 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import unquote
 
-from ..errors import CLOSED_WHILE_RUNNING, SLRError, SLRStoreGone, SLRTimeout, naming_the_store
+from ..errors import CLOSED_WHILE_RUNNING, STOPPED_BY_CALLER, SLRError, SLRStoreGone, SLRTimeout, \
+    naming_the_store
 from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
@@ -949,6 +950,22 @@ class Database:
         """
         self.stopping = True
 
+    def stop_query(self, stop: threading.Event) -> None:
+        """(``stop`` was just set) End the statement of the query whose ``stop`` it is, if
+        one runs now: on SQLite there is nothing to do here -- the statement's progress
+        handler looks at ``stop`` every :data:`STOP_CHECK_INSTRUCTIONS` instructions
+        (:meth:`run_compiled`), so no other statement of the connection can be cut.
+        Called without the lock, from any thread; it never waits.
+
+        >>> import threading
+        >>> from slr_sql.store import EventStore
+        >>> s, stop = EventStore(None), threading.Event()
+        >>> stop.set(); s.stop_query(stop)
+        >>> s.run_compiled("SELECT 1", {}, may_fall_back=True, stop=stop)
+        Traceback (most recent call last):
+        slr_sql.errors.SLRError: the query was stopped while it looked for its next answer
+        """
+
     def close(self) -> None:
         """Checkpoint what the WAL holds, as far as no reader needs it (``PASSIVE``: never
         waits for another connection), and close. Idempotent. A query's statement still
@@ -1524,7 +1541,8 @@ class Database:
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None, may_fall_back: bool = False,
-                     instructions: int | None = None) -> list[tuple]:
+                     instructions: int | None = None,
+                     stop: threading.Event | None = None) -> list[tuple]:
         """Run a compiled SELECT with named parameters; all rows, or the first ``limit``.
         ``deadline`` (``time.monotonic()``): past it the statement is interrupted and
         :class:`SLRTimeout` raised, as the interpreter does for ``timeout=``.
@@ -1537,6 +1555,9 @@ class Database:
         ``may_fall_back``: the caller answers with the interpreter when the statement
         fails, so a failure must leave the caller's transaction usable (SQLite's does); it
         is a query's statement, which :meth:`stop_queries` ends outside a transaction.
+        ``stop``: the query's stop (``Solutions.stop()`` sets it, from another thread, and
+        calls :meth:`stop_query`); once set, the statement is interrupted at its progress
+        handler's next check with SLRError :data:`~slr_sql.errors.STOPPED_BY_CALLER`.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})
@@ -1554,9 +1575,11 @@ class Database:
             stops = may_fall_back and not self.tx_depth
             if stops and self.stopping:
                 raise SLRError(CLOSED_WHILE_RUNNING)
+            if stop is not None and stop.is_set():
+                raise SLRError(STOPPED_BY_CALLER)
             try:
                 with self._deadline(deadline, "its compiled SQL statement", instructions,
-                                    stops=stops):
+                                    stops=stops, stop=stop):
                     cursor = self.conn.execute(sql, params)
                     try:
                         return fetch_rows(cursor, limit)
@@ -1601,11 +1624,13 @@ class Database:
 
     @contextmanager
     def _deadline(self, deadline: float | None, what: str,
-                  instructions: int | None = None, stops: bool = False) -> Iterator[None]:
+                  instructions: int | None = None, stops: bool = False,
+                  stop: threading.Event | None = None) -> Iterator[None]:
         """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``), or
         past ``instructions`` virtual machine instructions, with :class:`SLRTimeout`; with
         ``stops`` (a query's statement), once :meth:`stop_queries` was called, with SLRError
-        :data:`CLOSED_WHILE_RUNNING`. A statement run from inside another (a ``kb.define``
+        :data:`CLOSED_WHILE_RUNNING`; once ``stop`` (the query's) is set, with SLRError
+        :data:`STOPPED_BY_CALLER`. A statement run from inside another (a ``kb.define``
         predicate querying the kb from SQL) keeps the outer deadline, and without a budget
         of its own its instructions count against the outer budget: the handler is per
         connection (one with its own budget or an earlier deadline has its own handler while
@@ -1622,20 +1647,23 @@ class Database:
         if instructions is not None:
             def out_of_budget() -> int:
                 checks[0] += 1
-                if checks[0] > allowed or (stops and self.stopping):
+                if checks[0] > allowed or (stops and self.stopping) or (
+                        stop is not None and stop.is_set()):
                     return 1
                 return 1 if deadline is not None and time.monotonic() > deadline else 0
 
             handler = (out_of_budget, INSTRUCTIONS_PER_CHECK, stops)
         elif deadline is not outer:
-            handler = (lambda: 1 if (stops and self.stopping) or time.monotonic() > deadline
-                       else 0, STOP_CHECK_INSTRUCTIONS, stops)
-        elif stops and (outer_handler is None or not outer_handler[2]):
+            handler = (lambda: 1 if (stops and self.stopping) or (
+                stop is not None and stop.is_set()) or time.monotonic() > deadline else 0,
+                STOP_CHECK_INSTRUCTIONS, stops)
+        elif stop is not None or (stops and (outer_handler is None or not outer_handler[2])):
             # (no limit of its own: the outer's, if any, still counts)
             limit = None if outer_handler is None else outer_handler[0]
-            handler = (lambda: 1 if self.stopping or (limit is not None and limit()) else 0,
-                       STOP_CHECK_INSTRUCTIONS if outer_handler is None else outer_handler[1],
-                       True)
+            handler = (lambda: 1 if (stops and self.stopping) or (
+                stop is not None and stop.is_set()) or (limit is not None and limit()) else 0,
+                STOP_CHECK_INSTRUCTIONS if outer_handler is None else outer_handler[1],
+                stops)
         if handler is not outer_handler and handler is not None:
             self.deadline, self.progress = deadline, handler
             conn.set_progress_handler(handler[0], handler[1])
@@ -1652,6 +1680,8 @@ class Database:
                     raise SLRTimeout(f"query timed out (in {what})") from None
                 if stops and self.stopping:
                     raise SLRError(CLOSED_WHILE_RUNNING) from None
+                if stop is not None and stop.is_set():
+                    raise SLRError(STOPPED_BY_CALLER) from None
             raise busy_error(exc, self.path, self.busy_timeout) or exc from None
         finally:
             if handler is not outer_handler:

@@ -26,12 +26,12 @@ import time
 import weakref
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager, suppress
+from contextlib import AbstractContextManager, contextmanager, nullcontext, suppress
 from itertools import chain
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
-from ..errors import CLOSED_WHILE_RUNNING, SLRBusy, SLRCancelled, SLRError, \
+from ..errors import CLOSED_WHILE_RUNNING, STOPPED_BY_CALLER, SLRBusy, SLRCancelled, SLRError, \
     SLRServerUnreachable, SLRStatementTimeout, SLRTimeout, SLRUnavailable, naming_the_store
 from ..lockorder import ordered_lock
 from .connection import ChangedMeanwhile, Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
@@ -950,6 +950,8 @@ STOP_CANCEL_TIMEOUT = 5.0
 # Seconds a stopped read-only statement of kb.sql (on a connection of its own) is cancelled
 # again for, until its thread has ended
 CANCEL_AGAIN_FOR = 60.0
+# around a statement no stop can end (PgDatabase.run_compiled without one)
+_NOT_STOPPABLE = nullcontext()
 
 
 # A transaction-control statement, by its first keywords (PostgreSQL's "Transaction
@@ -1387,6 +1389,9 @@ class PgDatabase:
         # and the condition its end is told by
         self.query_thread: int | None = None
         self.query_ended = threading.Condition(threading.Lock())
+        # the stop of the query whose statement the server runs now (None: none), while it
+        # runs: what stop_query cancels (the statement only, never what comes after it)
+        self.query_stop: threading.Event | None = None
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -1669,6 +1674,64 @@ class PgDatabase:
                     self.query_ended.wait(pause)
                 running = self.query_thread
             pause = min(pause * 2, 2.0)
+
+    def stop_query(self, stop: threading.Event) -> None:
+        """(:meth:`Database.stop_query`) The statement of the query whose ``stop`` it is
+        (just set), if the server runs it now, is cancelled (``cancel_safe``) in a thread of
+        its own, so that the caller (the service's event loop) never waits: again until it
+        has ended -- a cancel that reaches the server before the statement is lost -- each
+        sent while the statement is known to run (as :meth:`stop_queries` sends its own), so
+        that no other statement of the connection is cut, not even the query's own
+        ``ROLLBACK`` after it. A statement of that query starting later is refused (it
+        looks at ``stop`` first). It takes no lock it would wait for: a signal handler of
+        the statement's own thread may call it (the shell's Ctrl-C)."""
+        if self.query_ended.acquire(blocking=False):
+            try:
+                if self.query_stop is not stop:
+                    return
+            finally:
+                self.query_ended.release()
+        # (else its holder is the statement's thread as the statement starts or ends -- this
+        # very thread, maybe, in a signal handler: never waited for -- or a cancel under way:
+        # a thread of its own looks)
+        threading.Thread(target=self._cancel_while_running, args=(stop,),
+                         name="slr-sql-stop", daemon=True).start()
+
+    def _cancel_while_running(self, stop: threading.Event) -> None:
+        """Cancel the statement of the query whose ``stop`` it is until it has ended (a pause
+        of :data:`CANCEL_AGAIN` doubling up to 2 s between two cancels)."""
+        pause = CANCEL_AGAIN
+        with self.query_ended:
+            while self.query_stop is stop:
+                # (this condition held: the statement's thread clears query_stop under it
+                # as soon as the statement ended, before it sends anything else)
+                with suppress(Exception):   # (a thread of its own: nobody to tell)
+                    self.conn.raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
+                self.query_ended.wait(pause)
+                pause = min(pause * 2, 2.0)
+
+    @contextmanager
+    def _stoppable(self, stop: threading.Event) -> Iterator[None]:
+        """Around the statement of a query given a ``stop`` (the lock held, the statement
+        alone: not its BEGIN, SET or ROLLBACK): known to :meth:`stop_query`, which cancels
+        it; refused when ``stop`` is set already, and a cancel it met once ``stop`` is set
+        said in the words of a stop (:data:`STOPPED_BY_CALLER`). Only for a query's
+        statement that may fail without failing the caller's transaction (outside one, or
+        in a savepoint: ``may_fall_back``)."""
+        with self.query_ended:
+            if stop.is_set():
+                raise SLRError(STOPPED_BY_CALLER)
+            self.query_stop = stop
+        try:
+            yield
+        except SLRCancelled:
+            if stop.is_set() and not self.stopping:   # (a close's cancel: said as such)
+                raise SLRError(STOPPED_BY_CALLER) from None
+            raise
+        finally:
+            with self.query_ended:
+                self.query_stop = None
+                self.query_ended.notify_all()
 
     @contextmanager
     def _query_statement(self) -> Iterator[None]:
@@ -2022,34 +2085,46 @@ class PgDatabase:
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None, may_fall_back: bool = False,
-                     instructions: int | None = None) -> list[tuple]:
+                     instructions: int | None = None,
+                     stop: threading.Event | None = None) -> list[tuple]:
         # (``instructions``: PostgreSQL counts none a client could bound; the deadline,
-        # statement_timeout, is its only limit)
+        # statement_timeout, is its only limit. ``stop``: see _stoppable)
         with self.lock:
             self.check_open()
+            if stop is not None and stop.is_set():
+                raise SLRError(STOPPED_BY_CALLER)
+            # (a query's statement -- one that may fall back -- may be stopped by its caller:
+            # outside a transaction or in a savepoint, a cancel fails it alone)
+            stoppable = _NOT_STOPPABLE if stop is None or not may_fall_back \
+                else self._stoppable(stop)
             if not may_fall_back or self.tx_depth:
                 # (inside a transaction it is part of a write -- an event rule's where goal
                 # deciding in its add -- which a close waits for)
-                return self._run_compiled(sql, params, limit, deadline, may_fall_back)
+                return self._run_compiled(sql, params, limit, deadline, may_fall_back,
+                                          stoppable)
             with self._query_statement():   # (a query's: a close cancels it)
-                return self._run_compiled(sql, params, limit, deadline, may_fall_back)
+                return self._run_compiled(sql, params, limit, deadline, may_fall_back,
+                                          stoppable)
 
     def _run_compiled(self, sql: str, params: dict, limit: int | None,
-                      deadline: float | None, may_fall_back: bool) -> list[tuple]:
-        """:meth:`run_compiled`, the lock held."""
+                      deadline: float | None, may_fall_back: bool,
+                      stoppable: AbstractContextManager[None]) -> list[tuple]:
+        """:meth:`run_compiled`, the lock held; ``stoppable`` around the statement."""
         deadline = self._outer(deadline)
         if deadline is None and (self.tx_depth == 0 or not may_fall_back):
             # (an event rule's statement inside the writer's transaction: a failure
             # fails the add, so no savepoint round trips)
-            cursor = self.conn.execute(sql, params)
-            return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+            with stoppable:
+                cursor = self.conn.execute(sql, params)
+                return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
         if deadline is None:
             # inside a transaction: a statement that fails (the query then goes to the
             # interpreter) must not abort the caller's transaction
             self.conn.execute("SAVEPOINT slr_compiled")
             try:
-                cursor = self.conn.execute(sql, params)
-                rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                with stoppable:
+                    cursor = self.conn.execute(sql, params)
+                    rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
             except BaseException:
                 self.conn.execute("ROLLBACK TO slr_compiled")
                 self.conn.execute("RELEASE slr_compiled")
@@ -2072,8 +2147,9 @@ class PgDatabase:
             outer = self.conn.execute("SHOW statement_timeout").fetchone()[0]
         try:
             self.conn.execute(f"SET LOCAL statement_timeout = {_timeout_ms(left)}")
-            cursor = self.conn.execute(sql, params)
-            rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+            with stoppable:
+                cursor = self.conn.execute(sql, params)
+                rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
             if not own:
                 self.conn.execute("SELECT set_config('statement_timeout', ?, true)",
                                   (outer,))
