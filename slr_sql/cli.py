@@ -1332,6 +1332,7 @@ class Shell:
         self.state = ShellState.READY
         self.running: Any = None      # the answers whose next one is looked for now
         self.signalled = False        # stop_goal stopped them (a Ctrl-C)
+        self.terminating: int | None = None   # ... for SIGTERM or SIGHUP: the shell ends
 
     @property
     def continuing(self) -> bool:
@@ -1342,7 +1343,7 @@ class Shell:
         return {ShellState.READY: "?- ", ShellState.CONTINUING: "   | ",
                 ShellState.CONSULTING: "|: "}[self.state]
 
-    def stop_goal(self) -> bool:
+    def stop_goal(self, terminating: int | None = None) -> bool:
         """(In the shell's SIGINT handler, a goal running) Whether the search for the goal's
         next answer on a local store was stopped: then the handler raises nothing, and that
         ``next()`` raises KeyboardInterrupt as the stop ends it (:meth:`_one_at_a_time`) --
@@ -1353,13 +1354,18 @@ class Shell:
         the connection with its statement unread ("another command is already in
         progress"). False (the handler raises) for a served goal's answers, which end with
         the KeyboardInterrupt itself, outside the search (the key after an answer), and for
-        a second Ctrl-C.
+        a second Ctrl-C. ``terminating``: SIGTERM or SIGHUP came (its number): the stopped
+        search raises :class:`ShellTerminated` instead, even after a Ctrl-C.
 
         >>> shell = Shell(slr_sql.open(), ask=lambda: ";"); shell.stop_goal()   # none runs
         False
         """
         answers = self.running
-        if not isinstance(answers, Solutions) or self.signalled:
+        if not isinstance(answers, Solutions):
+            return False
+        if terminating is not None:
+            self.terminating = terminating
+        elif self.signalled:
             return False
         self.signalled = True
         answers.stop()
@@ -1601,6 +1607,8 @@ class Shell:
                     break
                 except slr_sql.SLRError as exc:
                     if self.signalled and str(exc) == STOPPED_BY_CALLER:
+                        if self.terminating is not None:   # (the SIGTERM that stopped it)
+                            raise ShellTerminated(self.terminating) from None
                         raise KeyboardInterrupt from None   # (the Ctrl-C that stopped it)
                     raise
                 finally:
@@ -1933,7 +1941,7 @@ class ShellInterrupts:
     EDITING = "editing"    # inside the line editor's call, from before its prompt to after
     RUNNING = "running"    # a line is handled: Ctrl-C stops the goal
 
-    def __init__(self, app: Any, stop_goal: Callable[[], bool] | None = None):
+    def __init__(self, app: Any, stop_goal: Callable[..., bool] | None = None):
         self.app = app
         self.stop_goal = stop_goal
         self.state = self.EDITING
@@ -1963,6 +1971,11 @@ class ShellInterrupts:
         """The SIGTERM and SIGHUP handler: the shell ends (see the class's text)."""
         self.terminated = signum
         if self.state == self.RUNNING:
+            if self.stop_goal is not None:
+                # a local goal's search is stopped too: raised inside a statement SQLite runs
+                # (its progress handler), the exception below is cleared there and the goal
+                # went on in the interpreter; stopped, the search raises it again itself
+                self.stop_goal(signum)
             raise ShellTerminated(signum)
         if not self.started:
             return   # (editor_started asks the editor to exit; the loop checks, too)

@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import textwrap
+import time
 
 import pexpect
 import pytest
@@ -113,3 +114,40 @@ def test_a_shell_whose_terminal_hangs_up_ends_quietly_by_sighup(store, tmp_path)
     assert not os.path.exists(store + "-wal")    # closed: its log checkpointed and removed
     done = slr("query", store, "seg(O, L)^T")
     assert done.returncode == 0 and "cup2" in done.stdout, done.stderr
+
+
+def test_sigterm_during_a_goals_statement_compiled_to_sql_ends_the_shell_at_once(tmp_path):
+    """SIGTERM while SQLite runs a goal's compiled statement: the ShellTerminated its handler
+    raised was cleared inside SQLite's progress handler, and the goal went on in the
+    interpreter for a minute or more before the shell ended. The goal's query is stopped
+    now, and the shell ends as killed by the signal, the terminal cooked."""
+    from test_close_ends_running_queries import _slow_store
+
+    db = str(tmp_path / "slow.db")
+    _slow_store(db, signalled=False)[0].close()
+    parent, pid = shell_under_a_parent(db)
+    parent.sendline("explain slow.")          # (compiled first: it starts at once below)
+    parent.expect("engine: sql")
+    parent.expect(PROMPT)
+    parent.sendline("write(started), nl, slow.")
+    parent.expect("started\r\n")
+    # inside its statement: once the shell has spent 0.3 s of CPU since (planning takes
+    # milliseconds), as test_shell's _wait_until_its_statement_runs waits
+    def cpu_ticks() -> int:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+        return int(fields[11]) + int(fields[12])
+
+    began, deadline = cpu_ticks(), time.monotonic() + 30
+    while cpu_ticks() - began < 0.3 * os.sysconf("SC_CLK_TCK"):
+        assert time.monotonic() < deadline, "the statement did not run"
+        parent.expect([pexpect.TIMEOUT], timeout=0.02)
+    os.kill(pid, signal.SIGTERM)
+    parent.expect(r"STATUS (-?\d+) ICANON (\d) ECHO (\d)", timeout=30)
+    status, icanon, echo = (int(g) for g in parent.match.groups())
+    output = parent.before
+    parent.expect(pexpect.EOF)
+    parent.close()
+    assert (icanon, echo) == (1, 1)
+    assert status == -signal.SIGTERM
+    assert "Traceback" not in output and "interrupted" not in output
