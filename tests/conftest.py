@@ -115,8 +115,8 @@ def pytest_xdist_auto_num_workers(config):
 # The suite's longest tests (seconds each with `--durations`; most are differential runs of
 # hundreds of examples), started first: pytest-xdist hands tests out in collection order, and
 # a run on 2 cores must not end with one worker in a 20-second test while the other is idle.
-# The other tests keep their order. Keep the list to those of over ~4 s (a name that is gone is
-# ignored): `python -m pytest -q -p no:cacheprovider -n 2 --durations=40`.
+# The other tests keep their order. Keep the list to those of over ~4 s on an idle host (a name
+# that is gone is ignored): `python -m pytest -q -p no:cacheprovider -n 3 --durations=80`.
 STARTED_FIRST = (
     "tests/test_sql_differential.py::test_sql_equals_interpreter",
     "tests/test_fleet_retire.py::test_the_command_line_retires_shows_and_reinstates",
