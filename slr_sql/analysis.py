@@ -432,11 +432,16 @@ def goal_set(program: Program, goal: Any, library: Program | None = None,
     return GoalSet(types)
 
 
-def sccs(edges: dict[Any, Iterable[Any]]) -> list[list[Any]]:
-    """Strongly connected components (Tarjan, iterative), callees before callers.
+def sccs(edges: dict[Any, Iterable[Any]],
+         roots: Iterable[Any] | None = None) -> list[list[Any]]:
+    """Strongly connected components (Tarjan, iterative), callees before callers: of every
+    node, or of those reachable from ``roots`` (a node's component holds only nodes it
+    reaches, so theirs are the same as in the whole graph's).
 
     >>> sccs({1: [2], 2: [1, 3], 3: []})
     [[3], [2, 1]]
+    >>> sccs({1: [2], 2: [1, 3], 3: [], 4: [4]}, roots=[3, 2])
+    [[3], [1, 2]]
     """
     index: dict[Any, int] = {}
     low: dict[Any, int] = {}
@@ -444,11 +449,14 @@ def sccs(edges: dict[Any, Iterable[Any]]) -> list[list[Any]]:
     stack: list = []
     out: list[list[Any]] = []
     counter = 0
-    nodes = list(edges)
-    for n in edges.values():
-        for m in n:
-            if m not in edges:
-                nodes.append(m)
+    if roots is not None:
+        nodes = list(roots)
+    else:
+        nodes = list(edges)
+        for n in edges.values():
+            for m in n:
+                if m not in edges:
+                    nodes.append(m)
     for root in nodes:
         if root in index:
             continue
@@ -503,11 +511,15 @@ def recursive_predicates(program: Program, library: Program | None = None,
     """
     a = analyze(program, library)
     out: set[Node] = set()
-    for comp in sccs(a.edges):
-        if len(comp) > 1 or comp[0] in a.edges.get(comp[0], ()):
-            out.update(comp)
+    user = None
     if not include_library:
         user = {Node("pred", *k) for k in program.preds} | \
             {Node("event", *k) for k in program.temporal}
+    # (the program's nodes only: not the whole library's graph, which every store's open
+    # and every load asked about again)
+    for comp in sccs(a.edges, user):
+        if len(comp) > 1 or comp[0] in a.edges.get(comp[0], ()):
+            out.update(comp)
+    if user is not None:
         out &= user
     return out

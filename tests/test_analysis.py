@@ -105,6 +105,31 @@ def test_dependency_graph_and_recursion():
     assert Node("pred", "append", 3) in recursive_predicates(p, include_library=True)
 
 
+@pytest.mark.parametrize("text", [
+    "",
+    "anc(X,Y) :- par(X,Y). anc(X,Y) :- par(X,Z), anc(Z,Y). par(a,b).",
+    "even(0). even(N) :- N > 0, M is N - 1, odd(M). odd(N) :- N > 0, M is N - 1, even(M).",
+    "walk(X)^T :- walk(X)^S, T is S + 1. use(L) :- append(L, [a], M), member(x, M).",
+    "append(X, Y, Z) :- call(X, Y, Z), use(Z). use(L) :- append(L, [a], _).",
+    "maplist(G, L) :- w(G, L). w(G, L) :- maplist(G, L).",
+    # a cycle through the library: the program's select/3 calls selectchk/3, which calls
+    # select/3
+    "select(X, L, R) :- selectchk(X, L, R).",
+    ROBOT_PROGRAM,
+])
+def test_the_recursive_predicates_are_those_of_the_whole_graph(text):
+    """Asked from the program's own nodes (not the library's graph), the recursive
+    predicates are those the components of the whole graph give, also where the program
+    defines a predicate the library calls."""
+    p = program(text)
+    edges = analyze(p).edges
+    whole = {n for comp in sccs(edges) for n in comp
+             if len(comp) > 1 or comp[0] in edges.get(comp[0], ())}
+    user = {Node("pred", *k) for k in p.preds} | {Node("event", *k) for k in p.temporal}
+    assert recursive_predicates(p) == whole & user
+    assert recursive_predicates(p, include_library=True) == whole
+
+
 def test_sccs_orders_callees_first():
     comps = sccs({"a": ["b"], "b": ["c", "a"], "c": ["c"], "d": []})
     assert comps.index(["c"]) < next(i for i, c in enumerate(comps) if set(c) == {"a", "b"})

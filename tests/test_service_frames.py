@@ -322,12 +322,14 @@ def test_a_finished_delivery_leaves_nothing_for_the_cyclic_collector(tmp_path):
     fanouts: set[int] = set()   # (ids of this server's fan-outs, as its deliveries show)
 
     def alive() -> dict:
-        # (this knowledge base's deliveries and subscriptions only: in a worker of the whole
-        # suite, another test's server stopping in threads of its own may free its own later)
+        # (this server's connections and this knowledge base's deliveries and subscriptions
+        # only: in a worker of the whole suite, another test's server stopping in threads of
+        # its own may free its own later, and a connection of another server lives until its
+        # close handshake or its 10 s close timeout: the wait below waited for those too)
         counts = {"connections": 0, "deliveries": 0, "subscriptions": 0}
         for o in gc.get_objects():
             if type(o) is SubscriberWebSocketProtocol:
-                counts["connections"] += 1
+                counts["connections"] += o.connections is server.server_state.connections
             elif type(o) is Delivery:
                 if getattr(o.sub, "_hub", None) is hub:
                     fanouts.add(id(o._fanout))
