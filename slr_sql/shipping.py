@@ -204,10 +204,22 @@ def _tell_progress_after_commit(kb: Host) -> None:
     # synchronized queries waiting on this knowledge base (a served fleet store's clients'):
     # the fleet's marks moved under them on its own connection, which its change check does
     # not see, so they waited for their timeout. Told once committed (inside a caller's
-    # transaction the store's lock is held, and the synchronizer's lock comes before it)
+    # transaction the store's lock is held, and the synchronizer's lock comes before it).
+    # Then the decisions of the fleet store's event rules the marks allow (a recent or
+    # chronological rule, a cnot, a where reading the store): no mark was added here, whose
+    # pipeline would have made them -- they waited for the next add or clock move. The
+    # decisions pending, also those other connections left (shipments of other pushers),
+    # are read first: they hold the complex types back, and the queries on those must not
+    # be released by the marks alone.
     def tell() -> None:
+        cep, sync = kb.event_rule_engine, kb.synchronizer
+        deciding = cep is not None and cep.active and sync is not None
+        if deciding:
+            cep.reread_pending(now=True)
         for listener in kb.progress_listeners:
             listener()
+        if deciding:
+            sync.run_decisions()
     kb.store.after_commit(tell)
 
 

@@ -929,6 +929,29 @@ class Synchronizer:
             released = self._reread()
         self._schedule_all(released)
 
+    def run_decisions(self) -> None:
+        """Run the decisions of event rules that completeness allows now (the progress
+        hook: the event pipeline's stages 4-6), as a mark or a clock move does. For marks
+        raised on this knowledge base's own connection other than by a mark (a fleet
+        store's shipments and retirements raise the fleet's marks): :meth:`on_progress`
+        re-reads them, and this makes the decisions they allow.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+        >>> kb.load(":- consumption(recent).\\nr(X) <- a(X) seq b(X).")
+        >>> kb.add_many(["a(1)^1", "b(1)^3"])
+        []
+        >>> kb.query("r(X)^T")     # recent: the decision waits for a/1 and b/1 up to 3
+        []
+        >>> kb.store.meta_raise("sync/mark/a/1", 5.0); kb.store.meta_raise("sync/mark/b/1", 5.0)
+        5.0
+        5.0
+        >>> kb.synchronizer.on_progress(); kb.synchronizer.run_decisions(); kb.query("r(X)^[S, E]")
+        [{'X': 1, 'S': 1.0, 'E': 3.0}]
+        >>> kb.close()
+        """
+        self._progress()
+
     def _external_changes(self) -> list:
         """Reload marks, learned delays and in-order ends if another connection committed
         (lock held); returns the queries that may now go on."""

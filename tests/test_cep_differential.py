@@ -22,6 +22,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 
 import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
@@ -35,6 +36,8 @@ from slr_sql.cep.where import plain_value
 from slr_sql.encoding import decode, encode
 from slr_sql.terms import Atom, String, Struct, list_items, make_list
 
+# a longer hunt: SLR_DIFF_FACTOR=20 runs each random test with twenty times its examples
+FACTOR = int(os.environ.get("SLR_DIFF_FACTOR", "1"))
 TYPES = {"a": 1, "b": 1, "c": 1, "d": 2}
 BINARY = ["seq", "and", "par", "equals", "meets", "during", "starts", "finishes"]
 
@@ -410,7 +413,7 @@ def _typed(rows):
                   for v in row) for row in rows]
 
 
-@settings(max_examples=120, deadline=None,
+@settings(max_examples=120 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(rules(), streams(), st.data())
 def test_compiled_detection_equals_the_reference(rule, events, data):
@@ -477,7 +480,7 @@ TWO_POLICIES = ([{"pattern": _SEQ, "head": ["X"], "where": [], "cnot": None, "wi
                 [2, 0, 1], [], True)
 
 
-@settings(max_examples=40, deadline=None,
+@settings(max_examples=40 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(program_cases())
 @example(TWO_POLICIES)
@@ -485,7 +488,7 @@ def test_two_programs_each_pair_events_by_their_own_policy(case):
     programs_equal_the_reference(case)
 
 
-@settings(max_examples=40, deadline=None,
+@settings(max_examples=40 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(rules(), streams(), st.data())
 def test_any_arrival_order_gives_the_in_order_complex_events(rule, events, data):
@@ -520,7 +523,7 @@ def ab_points(draw):
     return out
 
 
-@settings(max_examples=60, deadline=None,
+@settings(max_examples=60 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(two_type_rules(), ab_points(), st.data())
 def test_a_batch_derives_what_its_events_derive_one_by_one_with_buffers(rule, events, data):
@@ -578,7 +581,7 @@ def ab_streams(draw):
     return out
 
 
-@settings(max_examples=60, deadline=None,
+@settings(max_examples=60 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(where_rules(), ab_streams(), st.data())
 def test_where_run_by_the_interpreter_equals_the_reference(rule, events, data):
@@ -617,7 +620,7 @@ def twin_case(rnd):
     return rule, events, order
 
 
-@settings(max_examples=25, deadline=None,
+@settings(max_examples=25 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(st.randoms(use_true_random=False))
 def test_zeros_of_two_signs_at_one_time_are_chosen_as_the_reference_in_any_order(rnd):
@@ -668,7 +671,7 @@ def arith_streams(draw):
     return out
 
 
-@settings(max_examples=80, deadline=None,
+@settings(max_examples=80 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(arith_rules(), arith_streams(), st.data())
 def test_arithmetic_where_pushed_into_sql_equals_the_reference(rule, events, data):
@@ -935,7 +938,7 @@ def test_points_a_buffer_refuses_are_not_kept_for_a_later_flush():
         assert kb.event_rules()[0]["detections"] == 0
 
 
-@settings(max_examples=40, deadline=None,
+@settings(max_examples=40 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(st.lists(st.tuples(_vector(3), _pose(), _pose()), min_size=1, max_size=6),
        st.sampled_from(["recent", "unrestricted"]))
@@ -959,7 +962,7 @@ def test_a_where_builtin_on_plain_values_derives_what_the_interpreter_derives(tr
     assert derived(False) == derived(True)
 
 
-@settings(max_examples=40, deadline=None,
+@settings(max_examples=40 * FACTOR, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(st.sampled_from(["Z is X + Y", "Z is X / Y", "succ(X, Z)", "plus(X, Y, Z)",
                         "atom_length(X, Z)", "Z is X - Y, Z > 0", "msort([X, Y], Z)"]),

@@ -3,8 +3,10 @@
 tests/test_fleet.py checks queries per robot and origin/2 on one hand-made fleet (SQL ==
 interpreter; PostgreSQL == SQLite on its fixed goals). Here hypothesis draws the robots'
 streams (points and intervals, ties, some events of the fleet's own with no robot), shipped
-in random batches to a fleet store in a SQLite file and to one in a PostgreSQL schema, and
-goals over event goals, prev, next and a rule reading prev. For each goal G and robot r,
+in random batches to a fleet store in a SQLite file and to one in a PostgreSQL schema (a
+robot sometimes retired after part of its stream shipped, then sometimes reinstated to ship
+the rest: docs/fleet.md, "Retiring a robot"), and goals over event goals, prev, next and a
+rule reading prev. For each goal G and robot r,
 on both fleet stores, compiled and interpreted:
 
 * ``fleet.query(G, robot=r)`` == ``G`` on r's own store (every event goal, prev and next of
@@ -81,10 +83,17 @@ def goals(draw):
 
 @st.composite
 def fleets(draw):
+    """The robots' streams (each split where a retirement may come), the fleet's own
+    events, the shipments' batch size, the goals, and which robot is retired after its
+    first part shipped (None: none) and whether it is then reinstated and ships the rest."""
     streams = {r: draw(st.lists(event, max_size=6)) for r in ROBOTS}
     own = draw(st.lists(event, max_size=2))
     batch = draw(st.integers(1, 4))
-    return streams, own, batch, draw(st.lists(goals(), min_size=1, max_size=4))
+    queries = draw(st.lists(goals(), min_size=1, max_size=4))
+    retired = draw(st.sampled_from([None, None] + ROBOTS))
+    cut = {r: draw(st.integers(0, len(streams[r]))) for r in ROBOTS}
+    reinstated = draw(st.booleans())
+    return streams, own, batch, queries, (retired, cut, reinstated)
 
 
 def _text(ev) -> str:
@@ -108,17 +117,21 @@ def _answers(kb, goal: str, interpreted: bool, **options) -> list:
 @given(fleets())
 def test_a_fleet_asked_about_one_robot_answers_as_its_own_store(database, tmp_path_factory,
                                                                  case):
-    streams, own_events, batch, queries = case
+    streams, own_events, batch, queries, (retired, cut, reinstated) = case
     folder: Path = tmp_path_factory.mktemp("fleet")
     fleets_ = [str(folder / "fleet.db"),
                database + ("&" if "?" in database else "?") + f"schema=f{next(_SCHEMAS)}"]
     robots = {}
     try:
+        # a retired robot's history stays on the fleet and is asked as before; one
+        # reinstated ships the rest of its stream after it (its own store has no more
+        # than the fleet got)
+        first = {r: streams[r][:cut[r]] if r == retired else streams[r] for r in ROBOTS}
         for r in ROBOTS:
             robots[r] = opened(folder / f"{r}.db", robot=r)
             robots[r].load(PROGRAM)
-            if streams[r]:
-                assert robots[r].add_many([_text(ev) for ev in streams[r]]) == []
+            if first[r]:
+                assert robots[r].add_many([_text(ev) for ev in first[r]]) == []
         for where in fleets_:
             for r in ROBOTS:
                 fleet.push(str(folder / f"{r}.db"), where, batch=batch)
@@ -126,6 +139,15 @@ def test_a_fleet_asked_about_one_robot_answers_as_its_own_store(database, tmp_pa
                 kb.load(PROGRAM)
                 if own_events:
                     assert kb.add_many([_text(ev) for ev in own_events]) == []
+            if retired is not None:
+                assert fleet.retire(where, retired)["already"] is False
+        if retired is not None and reinstated:
+            rest = streams[retired][cut[retired]:]
+            if rest:
+                assert robots[retired].add_many([_text(ev) for ev in rest]) == []
+            for where in fleets_:
+                assert fleet.reinstate(where, retired)["reinstated"] is True
+                fleet.push(str(folder / f"{retired}.db"), where, batch=batch)
         answers_of = {}
         for where in fleets_:
             with opened(where) as kb:

@@ -137,6 +137,45 @@ def test_a_retired_robot_ships_nothing_until_reinstated(where):
         assert receive(kb, "r2", [("seen", 1, [row(2, "late", 4.0)])], pending=0) == 1
 
 
+# a recent rule on the fleet store: its decision for b(1)^3 waits for a/1 and b/1 to be
+# complete up to 3 (the declared max_delays leave that to the marks)
+RECENT_RULE = (":- max_delay(a/1, 1.0e9).\n:- max_delay(b/1, 1.0e9).\n"
+               ":- consumption(recent).\nr(X) <- a(X) seq b(X).\n")
+
+
+@pytest.mark.parametrize("shipped_by", ["the same connection", "another connection"])
+@pytest.mark.parametrize("raised_by", ["a shipment's marks", "a retirement"])
+def test_the_marks_a_fleet_store_raises_make_the_decisions_of_its_event_rules(where,
+                                                                               raised_by,
+                                                                               shipped_by):
+    """The fleet's marks rise in the fleet store's own transaction (a shipment of marks, a
+    retirement), not by a mark added to it: the decisions of its event rules that they
+    allow are made then, as a mark's are -- they waited for the next add or clock move,
+    and a synchronized query on the complex events timed out on a decision pending though
+    every type the rule reads was complete. When another connection (another pusher) left
+    the decision pending, a query waiting on the complex events is not released by the
+    marks before it is made (it was answered without the complex event)."""
+    def a_row(seq: int, value: int, t: float) -> tuple:
+        return (seq, value, t, t, t, None)
+
+    clock = slr_sql.ManualClock(1000)
+    with slr_sql.open(where, clock=clock) as kb, slr_sql.open(where, clock=clock) as other:
+        kb.load(RECENT_RULE)
+        shipping = kb if shipped_by == "the same connection" else other
+        receive(shipping, "r2", [("a", 1, [a_row(1, 1, 0.5)])], {"a/1": 2.0, "b/1": 2.0},
+                pending=0)
+        receive(shipping, "r1", [("a", 1, [a_row(1, 1, 1.0)]), ("b", 1, [a_row(2, 1, 3.0)])],
+                {"a/1": 10.0, "b/1": 10.0}, pending=0)
+        assert kb.query("r(X)^[S, E]") == []          # the fleet: complete up to 2 only
+        waiting = kb.submit("r(X)^[S, E]", at=5)
+        if raised_by == "a retirement":
+            assert retire(kb, "r2")["raised"] == {"a/1": 10.0, "b/1": 10.0}
+        else:
+            receive(kb, "r2", [], {"a/1": 10.0, "b/1": 10.0})
+        assert kb.query("r(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 3.0}]
+        assert waiting.result(timeout=DEADLINE) == [{"X": 1, "S": 1.0, "E": 3.0}]
+
+
 def test_a_shipment_waits_for_a_retirement_of_its_robot_in_flight(postgres_url):
     """Two connections of a PostgreSQL fleet store: a shipment of r2 that starts while a
     retirement of r2 has not committed waits for it, then is refused -- it must not store

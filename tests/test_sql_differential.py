@@ -319,10 +319,12 @@ def check(prog):
     kb.close()
 
 
+# a longer hunt: SLR_DIFF_EXAMPLES=5000 with HYPOTHESIS_PROFILE=explore for fresh examples
+# (derandomized by the suite's ci profile, not here, so that the explore profile draws anew)
 EXAMPLES = int(__import__("os").environ.get("SLR_DIFF_EXAMPLES", "1000"))
 
 
-@settings(max_examples=EXAMPLES, derandomize=True, deadline=None,
+@settings(max_examples=EXAMPLES, deadline=None,
           suppress_health_check=list(HealthCheck))
 @given(program())
 def _sql_equals_interpreter(prog):

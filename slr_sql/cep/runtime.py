@@ -1432,12 +1432,17 @@ class EventRules:
                         (min(known[0], lo), max(known[1], hi))
         return derived
 
-    def reread_pending(self) -> None:
+    def reread_pending(self, now: bool = False) -> None:
         """Read every rule's summary of its pending decisions again before the next
         decision: after a rollback (what they were read after may be undone), or when a mark
         moved completeness, which may complete the decisions another connection left pending
-        (this one's summaries know only its own)."""
+        (this one's summaries know only its own). ``now``: read them at once -- before
+        marks raised without a mark's pipeline are re-read (a fleet store's shipments and
+        retirements), which releases the queries on the complex types whose pending
+        decisions this connection would not know of yet."""
         self._summaries_stale = True
+        if now:
+            self._read_stale_summaries()
 
     def _forget_statements(self) -> None:
         """After a rollback that may have taken back a start-ordered index: every
