@@ -81,6 +81,23 @@ def test_a_directive_in_a_later_text_of_the_same_program_sets_its_earlier_rules(
             [("pairs", "unrestricted"), ("user", "recent")]
 
 
+@pytest.mark.parametrize("directives, r_policy, q_policy", [
+    (":- consumption(r/0, recent).\n:- consumption(chronological).\n", "recent", "chronological"),
+    (":- consumption(chronological).\n:- consumption(r/0, recent).\n", "recent", "chronological"),
+    (":- consumption(recent).\n:- consumption(chronological).\n", "chronological",
+     "chronological"),
+    (":- consumption(r/0, recent).\n:- consumption(r/0, chronological).\n", "chronological",
+     "unrestricted"),
+], ids=["head-then-default", "default-then-head", "two-defaults", "two-heads"])
+def test_a_head_directive_wins_over_the_programs_default_in_either_order(
+        directives, r_policy, q_policy):
+    """(docs/events.md) Of two directives of one kind the last is in force; a rule's own
+    `Head/N` directive wins over the program's default wherever the two are written."""
+    with slr_sql.open(clock=ManualClock(0.0)) as kb:
+        kb.load(directives + "r <- a seq b.\nq <- a seq b.\n")
+        assert _policies(kb) == {("main", "r/0"): r_policy, ("main", "q/0"): q_policy}
+
+
 def test_a_head_directive_for_rules_only_another_program_has_is_refused(backend):
     with slr_sql.open(backend, clock=ManualClock(0.0)) as kb:
         kb.load(PAIRS, name="pairs")
