@@ -224,3 +224,29 @@ def test_the_service_refuses_fts3_tokenizer_and_stays_up(tmp_path):
         r = HTTP.post(server.url + "/sql", json={"query": "SELECT count(*) AS n FROM p"},
                       timeout=30)
         assert r.status_code == 200 and server.healthy(), r.text
+
+
+def test_the_tokenizer_is_switched_off_for_a_store_whose_file_name_is_no_utf8(tmp_path):
+    """The switch off (defence under the guard) looks the connection's file name up to be
+    sure of its handle; a name with a byte that is no UTF-8 was read as stored text (U+FFFD
+    and a StoredTextWarning) and never matched: the switch was left on for such a store."""
+    import warnings
+
+    from slr_sql.store.authorizer import fts3_tokenizer_switch_off
+
+    path = os.fsdecode(os.fsencode(str(tmp_path)) + b"/r\xffobot.db")
+    conn = sqlite3.connect(path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            switched = fts3_tokenizer_switch_off(conn)
+        if sys.version_info[:2] == (3, 11) and sys.implementation.name == "cpython":
+            assert switched
+            with pytest.raises(sqlite3.OperationalError, match="fts3tokenize disabled"):
+                conn.execute("SELECT fts3_tokenizer('simple', zeroblob(8))")
+    finally:
+        conn.close()
+    with slr_sql.open(path, clock=slr_sql.ManualClock(0.0)) as kb, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        kb.add("p(a)^1")
+        assert kb.query("p(X)^T") == [{"X": "a", "T": 1.0}]

@@ -352,11 +352,14 @@ def _connection_handle(conn: sqlite3.Connection, library: Any) -> int | None:
     if ctypes.c_void_p.from_address(handle).value != library.sqlite3_vfs_find(None):
         return None  # not an sqlite3 struct (whose first field is its VFS)
     try:
-        opened = fetch_row(conn.execute("PRAGMA database_list"))[2]
-    except sqlite3.Error:
+        # (the name's bytes: a file name need not be UTF-8, and its text would be no
+        # stored text to read tolerantly and warn of)
+        opened = fetch_row(conn.execute(
+            "SELECT CAST(file AS BLOB) FROM pragma_database_list WHERE name = 'main'"))[0]
+    except (sqlite3.Error, TypeError):
         return None
     named = library.sqlite3_db_filename(handle, b"main")
-    if (named or b"").decode("utf-8", "surrogateescape") != opened:
+    if (named or b"") != (opened or b""):
         return None
     return handle
 
