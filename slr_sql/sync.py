@@ -442,6 +442,11 @@ class Completeness:
         if key in self.warned:
             return
         self.warned.add(key)
+        derived = self.derived
+        if derived is not None and key in derived.types:
+            # a complex event type: its completeness follows from the types its rules read,
+            # whose own lateness is warned of; no delay of its own to declare
+            return
         d = self._decls().max_delay.get(key)
         if d is not None and d != "learn":
             return                          # a declared delay: nothing is learned

@@ -74,6 +74,21 @@ def test_a_declared_delay_is_not_capped_and_not_warned_about():
         assert kb.complete_until("seen/1") < 0
 
 
+def test_a_complex_event_type_is_not_warned_about_only_the_types_its_rules_read():
+    """A rule's complex events are as late as the events that complete them, which are
+    warned of; the warning for the complex type advised a delay it has no use for (its
+    completeness follows from its rule's types)."""
+    with slr_sql.open() as kb:
+        kb.load("seen_twice(X) <- seen(X) seq seen(X).")
+        caught = _add_recorded(kb)
+        with warnings.catch_warnings(record=True) as later:
+            warnings.simplefilter("always")
+            kb.add("seen(a)^8.0")                # its first complex event
+        assert kb.query("seen_twice(a)^[S, E]") == [{"S": 2.0, "E": 8.0}]
+        assert [str(w.message).split(":")[0] for w in caught] == ["seen/1", "pos/2"]
+        assert [w for w in later if issubclass(w.category, LearnedDelayWarning)] == []
+
+
 def test_a_wait_for_a_synchronized_answer_that_runs_out_says_what_it_waits_for():
     clock = slr_sql.ManualClock(0.0)
     with slr_sql.open(clock=clock) as kb:
