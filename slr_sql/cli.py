@@ -1596,6 +1596,13 @@ class Shell:
         # `repeat.`, shows its first at once and the next only when asked)
         self._one_at_a_time(self.kb.solutions(goal, at=self.at))
 
+    def _raise_the_signal(self) -> None:
+        """(A goal's search stopped by :meth:`stop_goal`) The exception of the signal that
+        stopped it: ShellTerminated for SIGTERM or SIGHUP, else KeyboardInterrupt."""
+        if self.terminating is not None:
+            raise ShellTerminated(self.terminating) from None
+        raise KeyboardInterrupt from None
+
     def _one_at_a_time(self, answers: Iterator[dict[str, Any]]) -> None:
         """SWI-Prolog's way: an answer, then the key pressed decides: the next or stop."""
         try:
@@ -1607,12 +1614,14 @@ class Shell:
                     break
                 except slr_sql.SLRError as exc:
                     if self.signalled and str(exc) == STOPPED_BY_CALLER:
-                        if self.terminating is not None:   # (the SIGTERM that stopped it)
-                            raise ShellTerminated(self.terminating) from None
-                        raise KeyboardInterrupt from None   # (the Ctrl-C that stopped it)
+                        self._raise_the_signal()
                     raise
                 finally:
                     self.running = None
+                if self.signalled:
+                    # (the stop came after the search's last check: the answer found is not
+                    # shown, the Ctrl-C or SIGTERM ends the goal now, not at the next key)
+                    self._raise_the_signal()
                 shown = {k: abbreviated(v) for k, v in answer.items()}
                 self.echo(answer_text(shown) if answer else "true", nl=False)
                 while True:

@@ -847,3 +847,26 @@ def test_variables_the_query_did_not_name_are_printed_as_swi_prologs_top_level_p
     # different variables under one name (docs/language.md's top-level paragraph)
     named = slr("shell", store, stdin="X = f(_A), copy_term(g(P, P), Y).\n")
     assert named.stdout == "X = f(_A), Y = g(_B,_B) .\n", named.stderr
+
+
+def test_a_ctrl_c_after_the_searchs_last_check_ends_the_goal_without_its_answer(store):
+    """A Ctrl-C (or SIGTERM) that stopped a local goal's search after the search's last look
+    at its stop -- in the Python work after a compiled statement ended, here a defined
+    predicate the answer's search calls, as the shell's signal handler would run there --
+    showed the answer found and waited for a key: the goal ended only at the next one."""
+    import signal
+
+    import slr_sql
+    from slr_sql.cli import Shell, ShellTerminated
+
+    said: list[str] = []
+    with slr_sql.open(store) as kb:
+        shell = Shell(kb, echo=lambda text, nl=True: said.append(text),
+                      echo_err=lambda text, nl=True: said.append(text), ask=lambda: ";")
+        kb.define("ctrl_c", 1, lambda x: shell.stop_goal())
+        kb.define("sigterm", 1, lambda x: shell.stop_goal(signal.SIGTERM))
+        with pytest.raises(KeyboardInterrupt):
+            shell.feed("between(1, 3, X), ctrl_c(X).")
+        with pytest.raises(ShellTerminated):
+            shell.feed("between(1, 3, X), sigterm(X).")
+    assert said == []
