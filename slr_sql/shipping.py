@@ -17,6 +17,7 @@ retire``): the fleet's marks stop waiting for it, and its shipments are refused 
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
 from typing import Any
@@ -27,6 +28,8 @@ from .host import Host
 from .store import check_robot_name
 from .store.checks import shown, text_problem
 from .store.fleet_keys import FLEET_MARK, fleet_mark_key, names_a_type, read_fleet_mark_key
+
+log = logging.getLogger("slr_sql.shipping")
 
 __all__ = ["FLEET_MARK", "FleetBehind", "RobotRetired", "ShipmentRefused", "fleet_mark_key",
            "names_a_type", "positions", "prepare", "read_fleet_mark_key", "receive", "reinstate",
@@ -211,16 +214,37 @@ def _tell_progress_after_commit(kb: Host) -> None:
     # decisions pending, also those other connections left (shipments of other pushers),
     # are read first: they hold the complex types back, and the queries on those must not
     # be released by the marks alone.
+    # What fails here is logged, not raised: the shipment or retirement is committed, and
+    # an error would tell its caller (a robot's pusher, which cannot mend the fleet store's
+    # listeners or rules) that it failed -- and skip the shipment's record of contact. A
+    # decision left unmade is made at the next add, mark or clock move.
     def tell() -> None:
         cep, sync = kb.event_rule_engine, kb.synchronizer
         deciding = cep is not None and cep.active and sync is not None
-        if deciding:
-            cep.reread_pending(now=True)
+        try:
+            if deciding:
+                cep.reread_pending(now=True)
+        except Exception as exc:   # (its queries are not released by the marks alone then)
+            _told_failed("reading its event rules' pending decisions", exc)
+            return
         for listener in kb.progress_listeners:
-            listener()
+            try:
+                listener()
+            except Exception as exc:
+                _told_failed("a progress listener", exc)
         if deciding:
-            sync.run_decisions()
+            try:
+                sync.run_decisions()
+            except Exception as exc:
+                _told_failed("its event rules' decisions", exc)
     kb.store.after_commit(tell)
+
+
+def _told_failed(what: str, exc: Exception) -> None:
+    """Log (no traceback: a listener's text is the user's) what failed after a fleet
+    store's marks moved."""
+    log.warning("the fleet store's marks moved (committed), but %s failed (%s: %s)",
+                what, type(exc).__name__, exc)
 
 
 def retire(kb: Host, robot: str) -> dict[str, Any]:

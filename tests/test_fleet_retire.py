@@ -176,6 +176,36 @@ def test_the_marks_a_fleet_store_raises_make_the_decisions_of_its_event_rules(wh
         assert waiting.result(timeout=DEADLINE) == [{"X": 1, "S": 1.0, "E": 3.0}]
 
 
+def test_an_error_after_the_marks_a_shipment_raised_is_logged_and_the_shipment_stands(
+        where, caplog):
+    """A listener of the fleet store failing on the complex events the shipment's marks let
+    its rules decide, once the shipment committed: receive raised the listener's own
+    ZeroDivisionError (a served fleet store answered the pusher 500, its log a traceback)
+    though the shipment was stored. It is logged in words; receive answers as stored."""
+    def a_row(seq: int, value: int, t: float) -> tuple:
+        return (seq, value, t, t, t, None)
+
+    def fails_on_complex_events(batch: list) -> None:
+        if any(event[0] == "r" for event in batch):
+            raise ZeroDivisionError("division by zero")
+
+    with slr_sql.open(where, clock=slr_sql.ManualClock(1000)) as kb:
+        kb.load(RECENT_RULE)
+        kb.add_listeners.append(fails_on_complex_events)
+        receive(kb, "r2", [], {"a/1": 2.0, "b/1": 2.0}, pending=0)
+        receive(kb, "r1", [("a", 1, [a_row(1, 1, 1.0)]), ("b", 1, [a_row(2, 1, 3.0)])],
+                {"a/1": 10.0, "b/1": 10.0}, pending=0)
+        with caplog.at_level("WARNING", logger="slr_sql.shipping"):
+            assert receive(kb, "r2", [("a", 1, [a_row(1, 7, 4.0)])],
+                           {"a/1": 10.0, "b/1": 10.0}, pending=3) == 1
+        assert kb.query("r(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 3.0}]
+        assert [r.getMessage() for r in caplog.records] == [
+            "the fleet store's marks moved (committed), but its event rules' decisions "
+            "failed (ZeroDivisionError: division by zero)"]
+        assert all(r.exc_info is None for r in caplog.records)
+        assert {c["robot"]: c["pending"] for c in kb.store.fleet_contacts()}["r2"] == 3
+
+
 def test_a_shipment_waits_for_a_retirement_of_its_robot_in_flight(postgres_url):
     """Two connections of a PostgreSQL fleet store: a shipment of r2 that starts while a
     retirement of r2 has not committed waits for it, then is refused -- it must not store
