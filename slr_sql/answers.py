@@ -180,6 +180,22 @@ def answer_text(answer: dict[str, Any]) -> str:
     return ", ".join(f"{name} = {value_text(value)}" for name, value in shown)
 
 
+def unnamed_variables_named(answer: dict[str, Any]) -> dict[str, Any]:
+    """``answer`` with the variables the query did not name renamed as :func:`answer_text`
+    names them, counted over the whole answer: for a caller that cuts the values before
+    printing them (the shell's ``[...|...]``), as SWI-Prolog's top level counts them -- a
+    variable held twice is ``_A`` also where the cut leaves it once.
+
+    >>> from slr_sql.terms import Var
+    >>> shared = Var()
+    >>> answer_text({"L": [shared, Var()], "M": [shared]})
+    'L = [_A,_], M = [_A]'
+    >>> answer_text({"M": unnamed_variables_named({"L": [shared, Var()], "M": [shared]})["M"]})
+    'M = [_A]'
+    """
+    return dict(_fresh_variables_named(list(answer.items()), taken=set(answer)))
+
+
 # the name the engine gives a variable no clause or query named (terms.Var)
 _FRESH_NAME = re.compile(r"_G\d+\Z")
 

@@ -24,7 +24,7 @@ import click
 import slr_sql
 
 from .api import KnowledgeBaseAPI
-from .answers import answer_text, rebuilt, value_text
+from .answers import answer_text, rebuilt, unnamed_variables_named, value_text
 from .encoding import decode
 from .arguments import check_time_option
 from .errors import STOPPED_BY_CALLER
@@ -1622,6 +1622,8 @@ class Shell:
                     # (the stop came after the search's last check: the answer found is not
                     # shown, the Ctrl-C or SIGTERM ends the goal now, not at the next key)
                     self._raise_the_signal()
+                # (its unnamed variables named over the whole answer, then the values cut)
+                answer = unnamed_variables_named(answer)
                 shown = {k: abbreviated(v) for k, v in answer.items()}
                 self.echo(answer_text(shown) if answer else "true", nl=False)
                 while True:

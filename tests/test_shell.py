@@ -817,6 +817,8 @@ UNNAMED_VARIABLE_GOALS = [
     "copy_term([A-B, B], X).",
     "length(L, 3), copy_term(L-L, C).",
     "length(L, 28), copy_term(L, C), append(C, C, D).",
+    # (the copy of V held twice in C, once past the `|...` cut: named over the whole answer)
+    "length(T, 12), append(T, [V], L), copy_term([V|L], C).",
 ]
 
 
