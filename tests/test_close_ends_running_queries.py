@@ -61,6 +61,24 @@ def _slow_store(where: str, signalled: bool = True
     return kb, started
 
 
+def _next_in_a_thread(answers) -> tuple[list, threading.Event]:
+    """Ask ``answers`` for its next answer on a thread of its own: (what it gave or raised,
+    once there; set then). A daemon thread: without a working stop the statement runs on
+    past the test's wait."""
+    outcome: list = []
+    ended = threading.Event()
+
+    def ask() -> None:
+        try:
+            outcome.append(next(answers))
+        except BaseException as exc:   # (the caller asserts on it)
+            outcome.append(exc)
+        ended.set()
+
+    threading.Thread(target=ask, daemon=True).start()
+    return outcome, ended
+
+
 def _store_pid(kb) -> int | None:
     """The server process of the store's connection (None on SQLite); asked before the
     query starts, whose statement holds the connection."""
@@ -391,18 +409,7 @@ def test_stop_ends_the_compiled_statement_of_its_query_and_the_store_answers_the
     with kb:
         pid = _store_pid(kb)
         answers = kb.solutions(goal, timeout=120)
-        outcome: list = []
-        ended = threading.Event()
-
-        def ask() -> None:
-            try:
-                outcome.append(next(answers))
-            except BaseException as exc:   # (asserted on below)
-                outcome.append(exc)
-            ended.set()
-
-        # (a daemon thread: without the fix the statement runs on past the test's wait)
-        threading.Thread(target=ask, daemon=True).start()
+        outcome, ended = _next_in_a_thread(answers)
         _wait_until_running(backend, pid, started, ended)
         answers.stop()
         assert ended.wait(DEADLINE), "the statement ran on after the stop"
@@ -427,17 +434,7 @@ def test_a_served_query_stopped_by_its_client_frees_the_server_at_once(backend, 
     with ServiceProcess(backend, "--max-query-time", "120", log=tmp_path / "server.log") \
             as served, slr_sql.connect(served.url) as client:
         answers = client.solutions("slow")
-        outcome: list = []
-        ended = threading.Event()
-
-        def ask() -> None:
-            try:
-                outcome.append(next(answers))
-            except BaseException as exc:   # (asserted on below)
-                outcome.append(exc)
-            ended.set()
-
-        threading.Thread(target=ask, daemon=True).start()
+        outcome, ended = _next_in_a_thread(answers)
         deadline = time.monotonic() + DEADLINE
         while HTTP.get(served.url + "/health").json()["queries"]["running"] == 0:
             assert time.monotonic() < deadline, "the query is not counted running"
