@@ -24,7 +24,7 @@ import click
 import slr_sql
 
 from .api import KnowledgeBaseAPI
-from .answers import answer_text, rebuilt, unnamed_variables_named, value_text
+from .answers import answer_text, unnamed_variables_named, value_text
 from .encoding import decode
 from .arguments import check_time_option
 from .errors import STOPPED_BY_CALLER
@@ -1270,37 +1270,61 @@ SHELL_HELP = """\
   help               this text;  Ctrl-C stops a goal;  Ctrl-D or `halt.` leaves"""
 
 SHELL_PROGRAM = "user"      # where the shell's clauses go (SWI-Prolog's module user)
-MAX_LIST_ITEMS = 10         # longer lists print as [a,b,...|...] unless `w` is pressed
-MAX_STRING_CHARS = 200
+MAX_DEPTH = 10     # SWI-Prolog's answer_write_options: max_depth(10), unless `w` is pressed
+_CUT = Atom("...")
 
 
-def abbreviated(value: Any) -> Any:
-    """``value`` with long lists and strings cut, as SWI-Prolog's top level prints answers
-    (``[1,2,3,4,5,6,7,8,9|...]``).
+def abbreviated(value: Any, depth: int = 1) -> Any:
+    """``value`` cut as SWI-Prolog's top level cuts an answer (``max_depth(10)``): a term
+    nested deeper than 10 prints as ``...``, a compound's arguments are one deeper than it,
+    and the k-th element of a list k deeper than the first, so that a list shows fewer
+    elements the deeper it is (``[1,2,3,4,5,6,7,8,9|...]`` at the top, 8 in ``f(L)``).
+    ``depth``: how deep ``value`` itself is. Strings are printed whole, as swipl 9 prints
+    them.
 
-    >>> value_text(abbreviated(list(range(1, 20))))
-    '[1,2,3,4,5,6,7,8,9|...]'
+    >>> value_text(abbreviated(list(range(1, 20)))), value_text(abbreviated([[1, 2, 3]], 9))
+    ('[1,2,3,4,5,6,7,8,9|...]', '[[...|...]]')
     """
-    def split(item: Any) -> tuple[Any, Any]:
-        if isinstance(item, list):
-            return item[:MAX_LIST_ITEMS], lambda args, length=len(item): _cut_list(args, length)
-        if isinstance(item, Struct):
-            return item.args, lambda args, name=item.name: Struct(name, tuple(args))
-        if isinstance(item, str) and not isinstance(item, Atom) and len(item) > MAX_STRING_CHARS:
-            return None, item[:MAX_STRING_CHARS] + "..."
-        return None, item
+    if depth > MAX_DEPTH:
+        return _CUT
+    if isinstance(value, list):
+        return _abbreviated_list(value, [], depth)
+    if isinstance(value, Struct):
+        if str(value.name) == "." and len(value.args) == 2:
+            return _abbreviated_list([value.args[0]], value.args[1], depth)
+        # (the depth bounds the recursion: nothing below MAX_DEPTH is walked)
+        return Struct(value.name, tuple(abbreviated(a, depth + 1) for a in value.args))
+    return value
 
-    return rebuilt(value, split)   # (iterative: an answer may be nested deeply)
 
-
-def _cut_list(items: list, length: int) -> Any:
-    """The first items of a list of ``length`` items, ``[a,b,...|...]`` if it had more."""
-    if length < MAX_LIST_ITEMS:
-        return items
-    tail: Any = Atom("...")
-    for item in reversed(items[:MAX_LIST_ITEMS - 1]):
-        tail = Struct(".", (item, tail))
-    return tail
+def _abbreviated_list(items: list, tail: Any, depth: int) -> Any:
+    """The list ``items`` then ``tail`` (``[]``, a Python list of the rest, a list cell or
+    any other term: a partial list) at ``depth``, cut as :func:`abbreviated` says: its k-th
+    element (from 0) is at ``depth + 1 + k``, and what follows the last element shown is
+    ``|...`` once it would be deeper than the limit."""
+    shown: list = []
+    k = 0
+    while True:
+        if k == len(items):
+            # the elements given are taken: go on into the tail (only as far as is shown)
+            if isinstance(tail, list):
+                items, tail = items + tail[:MAX_DEPTH + 1], (
+                    [] if len(tail) <= MAX_DEPTH + 1 else tail[MAX_DEPTH + 1:])
+            elif isinstance(tail, Struct) and str(tail.name) == "." and len(tail.args) == 2:
+                items, tail = items + [tail.args[0]], tail.args[1]
+            if k == len(items):      # no element left: the end, or a partial list's tail
+                if isinstance(tail, list):    # ([] : a proper list, printed whole)
+                    return shown
+                rest = abbreviated(tail, depth + 1 + k)
+                break
+        if k and depth + 1 + k > MAX_DEPTH:
+            rest = _CUT
+            break
+        shown.append(abbreviated(items[k], depth + 1 + k))
+        k += 1
+    for item in reversed(shown):
+        rest = Struct(".", (item, rest))
+    return rest
 
 
 class ShellState:
