@@ -11,29 +11,96 @@ import math
 import re
 from typing import Any, Callable
 
-from .terms import Var, deref, int_text, quoted_text, to_python
+from .terms import Struct, Var, deref, int_text, quoted_text, to_python
 
-__all__ = ["answer_bindings", "value_text", "answer_text", "rebuilt"]
+__all__ = ["answer_bindings", "query_variable_names", "value_text", "answer_text", "rebuilt"]
 
 
-def answer_bindings(names: list, frame: list, deadline: float | None = None) -> dict[str, Any]:
+def answer_bindings(names: list, frame: list, deadline: float | None = None,
+                    named: list | None = None) -> dict[str, Any]:
     """Bindings of the named variables, as SWI-Prolog's toplevel shows them: a variable left
     unbound is omitted unless it is shared with another named variable (``X = Y``).
     ``deadline`` (the query's, ``time.monotonic()``) also bounds converting a huge answer.
+
+    The unbound variables the values hold are named as SWI-Prolog's top level names them,
+    by what they are, not by the name the engine gave them: one that variables of the query
+    hold is named by the last of them in the query's order (``named``: the query's variables,
+    ``_X`` ones too, as ``(name, slot)``; ``names`` by default), one not starting with
+    ``_`` before one that does (only those are shown); any other (a clause's variable, an
+    ``_``, one a builtin made) is a new variable the engine names (``_G`` and a number),
+    which no query names. The answer's variables are new, not the engine's own.
 
     >>> from slr_sql.terms import Var
     >>> X, Y, Z = Var("X"), Var("Y"), Var("Z"); X.ref = 1; Y.ref = Z
     >>> answer_bindings([("X", 0), ("Y", 1), ("Z", 2), ("W", 3)], [X, Y, Z, Var("W")])
     {'X': 1, 'Y': Var('Z'), 'Z': Var('Z')}
+    >>> from slr_sql.terms import Struct
+    >>> X, Y, clauses = Var("X"), Var("Y"), Var("Y")   # (a clause's variable named Y)
+    >>> X.ref = Struct("f", (clauses, Y)); Y.ref = Var()
+    >>> shown = answer_bindings([("X", 0)], [X, Y], named=[("X", 0), ("Y", 1)])["X"]
+    >>> shown.args[0].name.startswith("_G"), shown.args[1]
+    (True, Var('Y'))
     """
     values = [(name, deref(frame[slot])) for name, slot in names]
     free = [id(v) for _, v in values if type(v) is Var]
     answer = {}
+    variables = None
     for name, v in values:
-        if type(v) is Var and free.count(id(v)) < 2:
-            continue
-        answer[name] = to_python(v, deadline)
+        tv = type(v)
+        if tv is Var or tv is Struct:
+            if tv is Var and free.count(id(v)) < 2:
+                continue
+            if variables is None:   # (a value that may hold a variable: most hold none)
+                variables = _AnswerVariables(names if named is None else named, frame)
+            answer[name] = to_python(v, deadline, variables)
+        else:
+            answer[name] = to_python(v, deadline)
     return answer
+
+
+class _AnswerVariables:
+    """The variable an answer holds for each unbound variable of the engine's (see
+    :func:`answer_bindings`), made when first asked for: most answers hold none."""
+
+    __slots__ = ("named", "frame", "given")
+
+    def __init__(self, named: list, frame: list):
+        self.named = named
+        self.frame = frame
+        self.given: dict[int, Var] | None = None
+
+    def __call__(self, var: Var) -> Var:
+        given = self.given
+        if given is None:
+            given = self.given = {key: Var(name) for key, name
+                                  in query_variable_names(self.named, self.frame).items()}
+        new = given.get(id(var))
+        if new is None:
+            new = Var()
+            while any(new.name == name for name, _ in self.named):   # (a query's _G2000)
+                new = Var()
+            given[id(var)] = new
+        return new
+
+
+def query_variable_names(named: list, frame: list) -> dict[int, str]:
+    """``id()`` of each unbound variable that variables of a query hold -> the name an
+    answer gives it, as SWI-Prolog's top level names it: the last of those variables in the
+    query's order (``named``, ``(name, slot)`` in ``frame``), one whose name does not start
+    with ``_`` before one that does (an answer shows only those).
+
+    >>> from slr_sql.terms import Var
+    >>> Z, Y, U = Var("Z"), Var("Y"), Var("_U"); Z.ref = U; Y.ref = U
+    >>> query_variable_names([("Z", 0), ("Y", 1), ("_U", 2)], [Z, Y, U]) == {id(U): "Y"}
+    True
+    """
+    given: dict[int, str] = {}
+    for name, slot in named:
+        v = deref(frame[slot])
+        if type(v) is Var and (not name.startswith("_")
+                               or given.get(id(v), "_").startswith("_")):
+            given[id(v)] = name
+    return given
 
 
 _SOLO_ATOMS = {"[]", "{}", "!", ";", ","}
@@ -159,8 +226,10 @@ def answer_text(answer: dict[str, Any]) -> str:
     """One answer as the Prolog top level prints it, on one line: ``X = a, Y = [1,2]``.
 
     An answer without variables (a goal that just succeeds) is ``true``. Variables the
-    query did not name are printed as SWI-Prolog's top level prints them: ``_`` where the
-    answer holds one only once, ``_A``, ``_B``, ... where it holds one more than once.
+    query did not name (an answer names them as the engine names its own, ``_G`` and a
+    number: :func:`answer_bindings`) are printed as SWI-Prolog's top level prints them:
+    ``_`` where the answer holds one only once, ``_A``, ``_B``, ... where it holds one more
+    than once; every other variable by its name, the query's.
 
     >>> answer_text({"X": 1, "L": [1, 2]}), answer_text({})
     ('X = 1, L = [1,2]', 'true')
@@ -196,7 +265,9 @@ def unnamed_variables_named(answer: dict[str, Any]) -> dict[str, Any]:
     return dict(_fresh_variables_named(list(answer.items()), taken=set(answer)))
 
 
-# the name the engine gives a variable no clause or query named (terms.Var)
+# the name the engine gives a variable no clause or query named (terms.Var); an answer names
+# so every variable that no variable of the query holds (answer_bindings), and the text
+# also comes from the names alone when the answer came over the service as JSON
 _FRESH_NAME = re.compile(r"_G\d+\Z")
 
 

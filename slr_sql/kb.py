@@ -662,7 +662,7 @@ class KnowledgeBase:
         answers = []
         names = plan.names
         for _ in m.solve(term):
-            answers.append(answer_bindings(names, frame, m.deadline))
+            answers.append(answer_bindings(names, frame, m.deadline, plan.named))
             if limit is not None and len(answers) >= limit:
                 break
         return answers
@@ -722,7 +722,7 @@ class KnowledgeBase:
                 raise SLRError("solutions: the term is nested too deeply") from None
             except Exception as exc:  # the facade's promise (see _boundary)
                 raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
-            yield answer_bindings(plan.names, frame)
+            yield answer_bindings(plan.names, frame, named=plan.named)
 
     def goal_warnings(self, goal: str) -> list[str]:
         """Warnings about ``goal`` that do not change its answer: an event goal or prev/next

@@ -48,6 +48,9 @@ class Plan:
     text: str
     lookup: "PrevLookup | None" = None
     bound_lookup: "BoundPrev | None" = None
+    # all the goal's named variables (those starting with _ too), in the goal's order: an
+    # answer names the unbound variables they hold after them (answers.answer_bindings)
+    named: list[tuple[str, int]] | None = None
 
 
 _ATOMIC = (Atom, String, int, float)
@@ -350,7 +353,8 @@ class PlanCache:
                 raise not_a_variable(name, goal)
         names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
         plan = Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
-                     PrevLookup.recognise(compiled))
+                    PrevLookup.recognise(compiled),
+                    named=[(n, slots[n]) for n in varnames if n in slots])
         if plan.lookup is not None:
             plan.bound_lookup = BoundPrev.prepare(plan.lookup, plan.bind_slots, names)
         if len(self.entries) > PLAN_CACHE_LIMIT:

@@ -1286,7 +1286,7 @@ class Synchronizer:
         solving = m.solve(term)
         try:
             for _ in solving:
-                answers.append(answer_bindings(plan.names, frame, m.deadline))
+                answers.append(answer_bindings(plan.names, frame, m.deadline, plan.named))
         except _MustWait as w:
             m.abandon(solving)
             wait = Wait(w.key, w.time, w.reason, self.clock.now(), w.kind)

@@ -528,12 +528,15 @@ class _CyclicTerm(Exception):
     """Raised inside to_python/format_term when a term turns out to be cyclic."""
 
 
-def to_python(t: Any, deadline: float | None = None) -> Any:
+def to_python(t: Any, deadline: float | None = None,
+              variables: Callable[[Var], Var] | None = None) -> Any:
     """Convert a term into the value handed to callers.
 
     Atoms stay :class:`Atom`, strings become ``str``, proper lists become ``list`` (the
     empty list ``[]`` too), compounds :class:`Struct` with converted args, unbound variables
-    stay :class:`Var`. Iterative (a term nested 100,000 deep converts). A cyclic term
+    stay :class:`Var`, or become ``variables(var)`` where that is given (an answer names
+    its variables so: :func:`slr_sql.answers.answer_bindings`). Iterative (a term nested
+    100,000 deep converts). A cyclic term
     (``X = f(X)``) comes back as SWI-Prolog prints it: ``@(Template, [S_1 = Value, ...])``
     with the variables ``S_1``... standing for the repeated subterms (see
     :func:`factorize_cycles`). ``deadline`` (``time.monotonic()``) stops the conversion of
@@ -541,6 +544,8 @@ def to_python(t: Any, deadline: float | None = None) -> Any:
 
     >>> to_python(make_list([Atom("a"), String("s")])), to_python(NIL)
     ([Atom('a'), 's'], [])
+    >>> to_python(Struct("f", (Var("Y"), 1)), variables=lambda v: Var("Z"))
+    Struct('f', (Var('Z'), 1))
     """
     tt = type(t)
     if tt is Atom:
@@ -548,12 +553,27 @@ def to_python(t: Any, deadline: float | None = None) -> Any:
     if tt is int or tt is float:
         return t
     try:
-        return _to_python(t, deadline)
+        return _to_python(t, deadline, variables)
     except _CyclicTerm:
-        return _to_python(factorize_cycles(t, deadline), deadline)
+        factored = factorize_cycles(t, deadline)
+        if variables is not None and factored is not t:
+            variables = _labels_kept(factored, variables)
+        return _to_python(factored, deadline, variables)
 
 
-def _to_python(t: Any, deadline: float | None) -> Any:
+def _labels_kept(factored: Struct, variables: Callable[[Var], Var]) -> Callable[[Var], Var]:
+    """``variables`` for the ``@(Template, [S_1 = Value, ...])`` of a cyclic term: the labels
+    ``S_1``, ... stand for subterms, not for variables of the term, and keep their names."""
+    labels = set()
+    equations = factored.args[1]
+    while type(equations) is Struct and equations.name == "." and len(equations.args) == 2:
+        labels.add(id(equations.args[0].args[0]))
+        equations = equations.args[1]
+    return lambda v: v if id(v) in labels else variables(v)
+
+
+def _to_python(t: Any, deadline: float | None,
+               variables: Callable[[Var], Var] | None = None) -> Any:
     done: list = []
     # work items: a term to convert, or a tuple (k, name, gray ids) that assembles the last k
     # converted values into a list (name None), a partial list (name CONS) or a compound
@@ -590,6 +610,9 @@ def _to_python(t: Any, deadline: float | None) -> Any:
             via = True
         tx = type(x)
         if tx is not Struct:
+            if tx is Var and variables is not None:
+                done.append(variables(x))
+                continue
             done.append(str(x) if tx is String else [] if tx is Atom and x == "[]" else x)
             continue
         keys: list[int] = []

@@ -824,33 +824,86 @@ UNNAMED_VARIABLE_GOALS = [
     # (the copy of V held twice in C, once past the `|...` cut: named over the whole answer)
     "length(T, 12), append(T, [V], L), copy_term([V|L], C).",
 ]
+# a program's clauses holding shared and singleton variables, some named as the goals' are
+CLAUSES = """\
+q(f(Y, Y, Z)).
+r(A, B) :- A = g(B, C, C).
+s([A, B, A | _]).
+long(L) :- length(L, 14), L = [A|_], last(L, A).
+pair(X, Y) :- X = Y.
+t(g(X, _), X).
+"""
+CLAUSE_VARIABLE_GOALS = [
+    "q(X).",
+    "q(X), Y = 1.",              # (the clause's Y is no query's Y)
+    "q(f(P, Q, R)).",
+    "r(X, Y).",
+    "X = f(Y), r(Z, Y).",
+    "s(L).",
+    "long(L).",                  # (its _A held twice, once past the `|...` cut)
+    "pair(X, Y).",
+    "pair(f(A), B).",
+    "t(X, f(Y)).",
+    "q(X), q(Y).",
+]
+# query variables bound to variables no query variable is: the last of those holding one
+# names it (swipl's top level), where before the engine's binding did or no name was left
+FRESH_BINDING_GOALS = [
+    "X = f(Y, _), Y = _.",
+    "X = f(Z), Y = Z.",
+    "X = Y.",
+    "Y = _, X = f(Y), Z = Y.",
+    "X = f(_), Y = g(X).",
+    "X = f(Y, _), Y = _, Z = g(_).",
+    "length(L, 12), L = [A|_], last(L, A).",
+]
+SWI_NAMING = {
+    "builtins' variables": (None, UNNAMED_VARIABLE_GOALS),
+    "clauses' variables": (CLAUSES, CLAUSE_VARIABLE_GOALS),
+    "query variables bound to fresh ones": (None, FRESH_BINDING_GOALS),
+}
 
 
+@pytest.mark.parametrize("program, goals", SWI_NAMING.values(), ids=list(SWI_NAMING))
 def test_variables_the_query_did_not_name_are_printed_as_swi_prologs_top_level_prints_them(
-        store):
-    """`copy_term(f(A, A, B), X).` printed `X = f(_G974,_G974,_G975)`: the engine's names.
-    Compared with swipl's top level given the same piped goals; its answers' other layout
-    (a binding a line, a space after each comma) is put as the shell's before comparing."""
+        store, tmp_path, program, goals):
+    """`copy_term(f(A, A, B), X).` printed `X = f(_G974,_G974,_G975)`: the engine's names;
+    with the clause `q(f(Y, Y, Z)).`, `q(X), Y = 1.` printed `X = f(Y,Y,Z), Y = 1` (the
+    clause's names, one the query's); `X = f(Y, _), Y = _.` printed `X = f(_,_)`.
+    Compared with swipl's top level given the same piped goals (and program); its answers'
+    other layout (a binding a line, a space after each comma) is put as the shell's before
+    comparing."""
     import shutil
     import subprocess
 
     swipl = shutil.which("swipl")
     assert swipl, "SWI-Prolog is the reference: install swi-prolog (.ci/run does)"
-    text = "\n".join(UNNAMED_VARIABLE_GOALS) + "\n"
+    consult = []
+    if program is not None:
+        path = tmp_path / "clauses.pl"
+        path.write_text(program, encoding="utf-8")
+        loaded = slr("load", store, str(path))
+        assert loaded.returncode == 0, loaded.stderr
+        consult = [str(path)]
+    text = "\n".join(goals) + "\n"
     ours = slr("shell", store, stdin=text)
     assert ours.returncode == 0 and ours.stderr == "", ours.stderr
-    theirs = subprocess.run([swipl, "-q"], input=text, capture_output=True, text=True,
-                            timeout=60)
+    theirs = subprocess.run([swipl, "-q", *consult], input=text, capture_output=True,
+                            text=True, timeout=60)
     assert theirs.returncode == 0, theirs.stderr
 
     def layout(answer: str) -> str:
         return re.sub(r",\s+", ",", answer.strip()).rstrip(".").strip()
 
     expected = [layout(a) for a in theirs.stdout.split("\n\n") if a.strip()]
+    assert len(expected) == len(goals), theirs.stdout
     assert [layout(a) for a in ours.stdout.splitlines()] == expected
     assert not re.search(r"_G\d", ours.stdout)
-    # a name the query gave is not given again: swipl 9.0 prints `Y = g(_A, _A)` here, two
-    # different variables under one name (docs/language.md's top-level paragraph)
+
+
+def test_a_name_the_query_gave_is_not_given_again(store):
+    """swipl 9.0 prints `Y = g(_A, _A)` here, two different variables under one name
+    (docs/printed_text.md)."""
     named = slr("shell", store, stdin="X = f(_A), copy_term(g(P, P), Y).\n")
     assert named.stdout == "X = f(_A), Y = g(_B,_B) .\n", named.stderr
 
