@@ -13,7 +13,7 @@ from typing import Any, Callable
 
 from .terms import Var, deref, int_text, quoted_text, to_python
 
-__all__ = ["answer_bindings", "value_text", "answer_text", "rebuilt"]
+__all__ = ["answer_bindings", "value_text", "binding_text", "answer_text", "rebuilt"]
 
 
 def answer_bindings(names: list, frame: list, deadline: float | None = None) -> dict[str, Any]:
@@ -118,16 +118,22 @@ def rebuilt(value: Any, split: Callable[[Any], tuple[Any, Any]]) -> Any:
     return done[0]
 
 
-def value_text(value: Any, digits: int | None = None) -> str:
+def value_text(value: Any, digits: int | None = None, priority: int = 1200) -> str:
     """Prolog text of one answer value: atoms quoted when needed, strings in double quotes.
-    ``digits`` rounds floats for display (the demo); by default they print exactly.
+    ``digits`` rounds floats for display (the demo); by default they print exactly, as
+    SWI-Prolog's ``writeq`` (``1.0e+22``, ``1.0Inf``). ``priority``: the highest operator
+    priority written without brackets (an operand of ``=`` is 699).
 
     >>> from slr_sql.terms import Atom
     >>> value_text(Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
     ('cup1', '"never-observed"', '[1,2.5]')
     """
-    from .terms import Atom, Struct, Var
+    from .terms import Atom, Struct, Var, format_term
 
+    if digits is None:
+        # the engine's printer (writeq's): operators, the brackets a list element or an
+        # operand needs (`[(a:-b)]`), quoting (`','`), floats as SWI-Prolog writes them
+        return format_term(_as_engine_term(value), priority=priority)
     if isinstance(value, bool):  # bool is an int subclass; never produced, but be exact
         return "true" if value else "false"
     if isinstance(value, Atom):
@@ -140,19 +146,27 @@ def value_text(value: Any, digits: int | None = None) -> str:
         return "[" + ",".join(value_text(v, digits) for v in value) + "]"
     if isinstance(value, Var):
         return str(value)
-    if isinstance(value, Struct) and digits is not None:
+    if isinstance(value, Struct):
         args = ",".join(value_text(a, digits) for a in value.args)
         if str(value.name) == "-" and len(value.args) == 2:
             return value_text(value.args[0], digits) + "-" + value_text(value.args[1], digits)
         return f"{_atom_text(str(value.name))}({args})"
-    if isinstance(value, Struct):
-        # Lists and strings nested in a compound must print as Prolog, so rebuild the engine
-        # term and let the project's printer (operators, quoting) render it.
-        try:
-            return str(_as_engine_term(value))
-        except Exception:  # printer not available: plain functional notation is still valid
-            return f"{_atom_text(str(value.name))}(" + ",".join(value_text(a) for a in value.args) + ")"
     return str(value)
+
+
+def binding_text(value: Any) -> str:
+    """A binding's value as SWI-Prolog's top level writes it after ``X = ``: as an operand
+    of ``=`` (priority 699: the conjunction ``(a, b)`` is written ``(a,b)``), so that
+    ``X = Value`` reads back as the same binding. (An atom that is an operator is written
+    as it is, ``X = table``, where swipl writes ``X = (table)``: docs/printed_text.md.)
+
+    >>> from slr_sql.terms import Atom, Struct
+    >>> binding_text(Struct(",", (Atom("a"), Atom("b")))), binding_text(Atom(","))
+    ('(a,b)', "','")
+    >>> binding_text([Struct(":-", (Atom("a"), Atom("b")))]), binding_text(1e22)
+    ('[(a:-b)]', '1.0e+22')
+    """
+    return value_text(value, priority=699)
 
 
 def answer_text(answer: dict[str, Any]) -> str:
@@ -177,7 +191,7 @@ def answer_text(answer: dict[str, Any]) -> str:
     if not shown:
         return "true"
     shown = _fresh_variables_named(shown, taken=set(answer))
-    return ", ".join(f"{name} = {value_text(value)}" for name, value in shown)
+    return ", ".join(f"{name} = {binding_text(value)}" for name, value in shown)
 
 
 def unnamed_variables_named(answer: dict[str, Any]) -> dict[str, Any]:
