@@ -11,7 +11,7 @@ import math
 import re
 from typing import Any, Callable
 
-from .terms import Var, deref, int_text, quoted_text, to_python
+from .terms import Atom, Struct, Var, deref, format_term, int_text, quoted_text, to_python
 
 __all__ = ["answer_bindings", "value_text", "binding_text", "answer_text", "rebuilt"]
 
@@ -64,33 +64,6 @@ def _number_text(x: float | int, digits: int | None = None) -> str:
     return int_text(x)   # (repr refuses an integer of more than 4,300 digits)
 
 
-def _as_engine_term(value: Any) -> Any:
-    """Turn a returned answer value back into an engine term, so the printer can quote it.
-
-    Returned strings are plain ``str`` (atoms are :class:`slr_sql.Atom`), so a plain ``str``
-    goes back to a Prolog string, not to an atom as ``from_python`` would make it. Iterative:
-    an answer may be nested deeper than Python's recursion (a program's fact 5,000 deep).
-
-    >>> from slr_sql.terms import Atom, Struct
-    >>> str(_as_engine_term(Struct("f", (Atom("a"), "s", [1, Struct("g", (2,))]))))
-    'f(a,"s",[1,g(2)])'
-    """
-    from .terms import Atom, String, Struct, Var, make_list
-
-    def split(item: Any) -> tuple[Any, Any]:
-        if isinstance(item, Atom) or isinstance(item, Var):
-            return None, item
-        if isinstance(item, str):
-            return None, String(item)
-        if isinstance(item, Struct):
-            return item.args, lambda args, name=item.name: Struct(name, tuple(args))
-        if isinstance(item, (list, tuple)):
-            return item, make_list
-        return None, item
-
-    return rebuilt(value, split)
-
-
 def rebuilt(value: Any, split: Callable[[Any], tuple[Any, Any]]) -> Any:
     """``value`` rebuilt from the leaves up, without recursion (an answer may be nested
     deeper than Python's recursion): ``split(item)`` gives ``(None, new_leaf)`` for a leaf,
@@ -128,12 +101,19 @@ def value_text(value: Any, digits: int | None = None, priority: int = 1200) -> s
     >>> value_text(Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
     ('cup1', '"never-observed"', '[1,2.5]')
     """
-    from .terms import Atom, Struct, Var, format_term
 
     if digits is None:
+        kind = type(value)
+        if kind is Atom and _PLAIN_ATOM.match(value):
+            return str(value)        # (the common values, as the printer writes them)
+        if kind is int:
+            return int_text(value)
+        if kind is float:
+            return format_term(value)
         # the engine's printer (writeq's): operators, the brackets a list element or an
         # operand needs (`[(a:-b)]`), quoting (`','`), floats as SWI-Prolog writes them
-        return format_term(_as_engine_term(value), priority=priority)
+        # (the printer takes a value as returned: lists as Python lists, strings as str)
+        return format_term(value, priority=priority)
     if isinstance(value, bool):  # bool is an int subclass; never produced, but be exact
         return "true" if value else "false"
     if isinstance(value, Atom):
@@ -183,7 +163,6 @@ def answer_text(answer: dict[str, Any]) -> str:
     >>> answer_text({"X": Struct("f", (shared, shared, other)), "L": [other, Var()]})
     'X = f(_A,_A,_B), L = [_B,_]'
     """
-    from .terms import Var
 
     # X = Y answers {'X': Var('Y'), 'Y': Var('Y')}; like Prolog, do not print "Y = Y".
     shown = [(name, value) for name, value in answer.items()
@@ -219,7 +198,6 @@ def _fresh_variables_named(shown: list[tuple[str, Any]],
     """``shown`` with each unnamed variable renamed as SWI-Prolog's top level names it, in
     the order they are printed: ``_`` for one that occurs once, else the next of ``_A``,
     ``_B``, ... (``_A1`` after ``_Z``) that no variable of the answer is named already."""
-    from .terms import Struct, Var
 
     order: list[str] = []
     counts: dict[str, int] = {}
