@@ -11,9 +11,10 @@ import math
 import re
 from typing import Any, Callable
 
-from .terms import Struct, Var, deref, int_text, quoted_text, to_python
+from .terms import Atom, Struct, Var, deref, format_term, int_text, quoted_text, to_python
 
-__all__ = ["answer_bindings", "query_variable_names", "value_text", "answer_text", "rebuilt"]
+__all__ = ["answer_bindings", "query_variable_names", "value_text", "binding_text", "answer_text",
+           "rebuilt"]
 
 
 def answer_bindings(names: list, frame: list, deadline: float | None = None,
@@ -131,33 +132,6 @@ def _number_text(x: float | int, digits: int | None = None) -> str:
     return int_text(x)   # (repr refuses an integer of more than 4,300 digits)
 
 
-def _as_engine_term(value: Any) -> Any:
-    """Turn a returned answer value back into an engine term, so the printer can quote it.
-
-    Returned strings are plain ``str`` (atoms are :class:`slr_sql.Atom`), so a plain ``str``
-    goes back to a Prolog string, not to an atom as ``from_python`` would make it. Iterative:
-    an answer may be nested deeper than Python's recursion (a program's fact 5,000 deep).
-
-    >>> from slr_sql.terms import Atom, Struct
-    >>> str(_as_engine_term(Struct("f", (Atom("a"), "s", [1, Struct("g", (2,))]))))
-    'f(a,"s",[1,g(2)])'
-    """
-    from .terms import Atom, String, Struct, Var, make_list
-
-    def split(item: Any) -> tuple[Any, Any]:
-        if isinstance(item, Atom) or isinstance(item, Var):
-            return None, item
-        if isinstance(item, str):
-            return None, String(item)
-        if isinstance(item, Struct):
-            return item.args, lambda args, name=item.name: Struct(name, tuple(args))
-        if isinstance(item, (list, tuple)):
-            return item, make_list
-        return None, item
-
-    return rebuilt(value, split)
-
-
 def rebuilt(value: Any, split: Callable[[Any], tuple[Any, Any]]) -> Any:
     """``value`` rebuilt from the leaves up, without recursion (an answer may be nested
     deeper than Python's recursion): ``split(item)`` gives ``(None, new_leaf)`` for a leaf,
@@ -185,16 +159,29 @@ def rebuilt(value: Any, split: Callable[[Any], tuple[Any, Any]]) -> Any:
     return done[0]
 
 
-def value_text(value: Any, digits: int | None = None) -> str:
+def value_text(value: Any, digits: int | None = None, priority: int = 1200) -> str:
     """Prolog text of one answer value: atoms quoted when needed, strings in double quotes.
-    ``digits`` rounds floats for display (the demo); by default they print exactly.
+    ``digits`` rounds floats for display (the demo); by default they print exactly, as
+    SWI-Prolog's ``writeq`` (``1.0e+22``, ``1.0Inf``). ``priority``: the highest operator
+    priority written without brackets (an operand of ``=`` is 699).
 
     >>> from slr_sql.terms import Atom
     >>> value_text(Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
     ('cup1', '"never-observed"', '[1,2.5]')
     """
-    from .terms import Atom, Struct, Var
 
+    if digits is None:
+        kind = type(value)
+        if kind is Atom and _PLAIN_ATOM.match(value):
+            return str(value)        # (the common values, as the printer writes them)
+        if kind is int:
+            return int_text(value)
+        if kind is float:
+            return format_term(value)
+        # the engine's printer (writeq's): operators, the brackets a list element or an
+        # operand needs (`[(a:-b)]`), quoting (`','`), floats as SWI-Prolog writes them
+        # (the printer takes a value as returned: lists as Python lists, strings as str)
+        return format_term(value, priority=priority)
     if isinstance(value, bool):  # bool is an int subclass; never produced, but be exact
         return "true" if value else "false"
     if isinstance(value, Atom):
@@ -207,19 +194,27 @@ def value_text(value: Any, digits: int | None = None) -> str:
         return "[" + ",".join(value_text(v, digits) for v in value) + "]"
     if isinstance(value, Var):
         return str(value)
-    if isinstance(value, Struct) and digits is not None:
+    if isinstance(value, Struct):
         args = ",".join(value_text(a, digits) for a in value.args)
         if str(value.name) == "-" and len(value.args) == 2:
             return value_text(value.args[0], digits) + "-" + value_text(value.args[1], digits)
         return f"{_atom_text(str(value.name))}({args})"
-    if isinstance(value, Struct):
-        # Lists and strings nested in a compound must print as Prolog, so rebuild the engine
-        # term and let the project's printer (operators, quoting) render it.
-        try:
-            return str(_as_engine_term(value))
-        except Exception:  # printer not available: plain functional notation is still valid
-            return f"{_atom_text(str(value.name))}(" + ",".join(value_text(a) for a in value.args) + ")"
     return str(value)
+
+
+def binding_text(value: Any) -> str:
+    """A binding's value as SWI-Prolog's top level writes it after ``X = ``: as an operand
+    of ``=`` (priority 699: the conjunction ``(a, b)`` is written ``(a,b)``), so that
+    ``X = Value`` reads back as the same binding. (An atom that is an operator is written
+    as it is, ``X = table``, where swipl writes ``X = (table)``: docs/printed_text.md.)
+
+    >>> from slr_sql.terms import Atom, Struct
+    >>> binding_text(Struct(",", (Atom("a"), Atom("b")))), binding_text(Atom(","))
+    ('(a,b)', "','")
+    >>> binding_text([Struct(":-", (Atom("a"), Atom("b")))]), binding_text(1e22)
+    ('[(a:-b)]', '1.0e+22')
+    """
+    return value_text(value, priority=699)
 
 
 def answer_text(answer: dict[str, Any]) -> str:
@@ -238,7 +233,6 @@ def answer_text(answer: dict[str, Any]) -> str:
     >>> answer_text({"X": Struct("f", (shared, shared, other)), "L": [other, Var()]})
     'X = f(_A,_A,_B), L = [_B,_]'
     """
-    from .terms import Var
 
     # X = Y answers {'X': Var('Y'), 'Y': Var('Y')}; like Prolog, do not print "Y = Y".
     shown = [(name, value) for name, value in answer.items()
@@ -246,7 +240,7 @@ def answer_text(answer: dict[str, Any]) -> str:
     if not shown:
         return "true"
     shown = _fresh_variables_named(shown, taken=set(answer))
-    return ", ".join(f"{name} = {value_text(value)}" for name, value in shown)
+    return ", ".join(f"{name} = {binding_text(value)}" for name, value in shown)
 
 
 def unnamed_variables_named(answer: dict[str, Any]) -> dict[str, Any]:
@@ -276,7 +270,6 @@ def _fresh_variables_named(shown: list[tuple[str, Any]],
     """``shown`` with each unnamed variable renamed as SWI-Prolog's top level names it, in
     the order they are printed: ``_`` for one that occurs once, else the next of ``_A``,
     ``_B``, ... (``_A1`` after ``_Z``) that no variable of the answer is named already."""
-    from .terms import Struct, Var
 
     order: list[str] = []
     counts: dict[str, int] = {}
