@@ -49,6 +49,8 @@ try:
             pass
     elif how == "sub-goal":   # a compiled sub-goal the interpreter calls
         kb.query("member(A, [1]), " + goal)
+    elif how == "synchronized":   # evaluated on a worker thread of the knowledge base
+        kb.query(goal, at=600, wait=True)
     print("answered", flush=True)
 except KeyboardInterrupt:
     print(f"KeyboardInterrupt after {time.monotonic() - began:.1f} s", flush=True)
@@ -86,16 +88,20 @@ def _wait_until_its_statement_runs(child: pexpect.spawn, where: str) -> None:
             child.expect([pexpect.TIMEOUT], timeout=0.02)
 
 
-@pytest.mark.parametrize("how", ["query", "query with a timeout", "solutions", "sub-goal"])
+@pytest.mark.parametrize("how", ["query", "query with a timeout", "solutions", "sub-goal",
+                                 "synchronized"])
 @pytest.mark.parametrize("goal", ["slow", "counted(N)"])
 def test_ctrl_c_during_a_compiled_statement_raises_keyboard_interrupt_at_once(backend, goal,
                                                                                how):
     """The program gets the KeyboardInterrupt well before the statement would end, the next
     query answers, and the store holds its events; on both backends, for a query, a query
     with a timeout (PostgreSQL's statement_timeout in a transaction of its own), the
-    answers one at a time, and a compiled sub-goal the interpreter calls."""
+    answers one at a time, a compiled sub-goal the interpreter calls, and a synchronized
+    query (its statement runs on a worker thread: the KeyboardInterrupt came at once, but
+    the statement ran on, and the next query waited for the store's connection)."""
     kb = _slow_store(backend, signalled=False)[0]
     kb.load(PROGRAM)
+    kb.mark_complete("p/1", 1000)   # (the synchronized query's history is complete)
     kb.close()
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     child = pexpect.spawn(sys.executable, ["-c", CHILD, backend, goal, how], env=env,
