@@ -17,16 +17,20 @@ from pathlib import Path
 import pexpect
 import pytest
 
+import slr_sql
+
 from test_close_ends_running_queries import DEADLINE, EVENTS, SLOW_BODY, _slow_store
 
 ROOT = Path(__file__).resolve().parent.parent
 
-# Two goals of one long statement each (a minute or more of either engine's work): `slow`
-# calls a Python function (slr_num) row by row, where Python most often runs the signal's
-# handler on SQLite; `counted(N)` calls none (there the handler runs in the statement's
-# progress handler)
+# Goals of one long statement each (a minute or more of either engine's work): `slow` calls
+# a Python function of one argument (slr_num) row by row, where Python most often runs the
+# signal's handler on SQLite; `counted(N)` calls none (there the handler runs in the
+# statement's progress handler); `differing` calls one of several arguments (slr_det; on
+# SQLite only: PostgreSQL runs it in the interpreter)
 PROGRAM = (f"slow :- {SLOW_BODY.format(started='')}. "
-           "counted(N) :- aggregate_all(count, (p(_)^_, p(_)^_, p(_)^_), N).")
+           "counted(N) :- aggregate_all(count, (p(_)^_, p(_)^_, p(_)^_), N). "
+           "differing :- p(X)^_, p(Y)^_, p(Z)^_, X \\== Y, Y \\== Z, X == Z, X == -1.")
 
 # The program: asks GOAL the way HOW says, reports how the ask ended and how long it took,
 # then asks again and counts the events
@@ -88,27 +92,21 @@ def _wait_until_its_statement_runs(child: pexpect.spawn, where: str) -> None:
             child.expect([pexpect.TIMEOUT], timeout=0.02)
 
 
-@pytest.mark.parametrize("how", ["query", "query with a timeout", "solutions", "sub-goal",
-                                 "synchronized"])
-@pytest.mark.parametrize("goal", ["slow", "counted(N)"])
-def test_ctrl_c_during_a_compiled_statement_raises_keyboard_interrupt_at_once(backend, goal,
-                                                                               how):
-    """The program gets the KeyboardInterrupt well before the statement would end, the next
-    query answers, and the store holds its events; on both backends, for a query, a query
-    with a timeout (PostgreSQL's statement_timeout in a transaction of its own), the
-    answers one at a time, a compiled sub-goal the interpreter calls, and a synchronized
-    query (its statement runs on a worker thread: the KeyboardInterrupt came at once, but
-    the statement ran on, and the next query waited for the store's connection)."""
-    kb = _slow_store(backend, signalled=False)[0]
+def _interrupted_program(where: str, goal: str, how: str, **environment: str) -> None:
+    """Run CHILD over a store at ``where`` (EVENTS p/1 events, PROGRAM), send it SIGINT once
+    its statement runs, and check what it says: the KeyboardInterrupt well before the
+    statement would end, the next query answered, the events all there; and the store
+    holds them when opened again."""
+    kb = _slow_store(where, signalled=False)[0]
     kb.load(PROGRAM)
     kb.mark_complete("p/1", 1000)   # (the synchronized query's history is complete)
     kb.close()
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    child = pexpect.spawn(sys.executable, ["-c", CHILD, backend, goal, how], env=env,
+    env = dict(os.environ, PYTHONPATH=str(ROOT), **environment)
+    child = pexpect.spawn(sys.executable, ["-c", CHILD, where, goal, how], env=env,
                           cwd=str(ROOT), encoding="utf-8", timeout=DEADLINE)
     try:
         child.expect("asking\r\n")
-        _wait_until_its_statement_runs(child, backend)
+        _wait_until_its_statement_runs(child, where)
         child.kill(signal.SIGINT)
         # (the statement alone runs a minute or more: an answer or a wait past DEADLINE
         # means the Ctrl-C did not stop it)
@@ -124,5 +122,36 @@ def test_ctrl_c_during_a_compiled_statement_raises_keyboard_interrupt_at_once(ba
     finally:
         child.close(force=True)
     assert child.exitstatus == 0, child.before
-    with __import__("slr_sql").open(backend) as again:
+    with slr_sql.open(where) as again:
         assert again.query("findall(X, p(X)^_, L), length(L, N)")[0]["N"] == EVENTS
+
+
+@pytest.mark.parametrize("how", ["query", "query with a timeout", "solutions", "sub-goal",
+                                 "synchronized"])
+@pytest.mark.parametrize("goal", ["slow", "counted(N)"])
+def test_ctrl_c_during_a_compiled_statement_raises_keyboard_interrupt_at_once(backend, goal,
+                                                                               how):
+    """The program gets the KeyboardInterrupt well before the statement would end, the next
+    query answers, and the store holds its events; on both backends, for a query, a query
+    with a timeout (PostgreSQL's statement_timeout in a transaction of its own), the
+    answers one at a time, a compiled sub-goal the interpreter calls, and a synchronized
+    query (its statement runs on a worker thread: the KeyboardInterrupt came at once, but
+    the statement ran on, and the next query waited for the store's connection)."""
+    _interrupted_program(backend, goal, how)
+
+
+@pytest.mark.parametrize("how", ["query", "sub-goal"])
+def test_ctrl_c_met_in_a_function_of_several_arguments_raises_keyboard_interrupt(tmp_path,
+                                                                                 how):
+    """SQLite: a statement calling slr_det (\\==, ==) row by row, where Python most often
+    runs the signal's handler; sqlite3 cleared its KeyboardInterrupt there (and again in the
+    compiled sub-goal the interpreter then called: only a third Ctrl-C landed). PostgreSQL
+    runs such a goal in the interpreter."""
+    _interrupted_program(str(tmp_path / "robot.db"), "differing", how)
+
+
+@pytest.mark.parametrize("goal", ["slow", "counted(N)"])
+def test_ctrl_c_without_the_c_speedups_raises_keyboard_interrupt(tmp_path, goal):
+    """SQLite without the C speedups (SLR_SQL_NO_SPEEDUPS=1): the progress handler and the
+    functions of one argument (slr_num) keep the KeyboardInterrupt in Python."""
+    _interrupted_program(str(tmp_path / "robot.db"), goal, "query", SLR_SQL_NO_SPEEDUPS="1")

@@ -39,6 +39,7 @@ from urllib.parse import unquote
 
 from ..errors import CLOSED_WHILE_RUNNING, STOPPED_BY_CALLER, SLRError, SLRStoreGone, SLRTimeout, \
     naming_the_store
+from ..encoding import signal_safe_loop
 from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
@@ -606,7 +607,7 @@ class Database:
         # our progress handlers asked SQLite to end a statement (a deadline, a budget, a
         # stop, a close): an "interrupted" statement without it was ended by an exception
         # that escaped the handler
-        self.escaped: BaseException | None = None
+        self.escaped: list[BaseException] = []
         self.ended_by_handler = False
         # the Python functions statements may call (install_functions), on every connection
         self.functions: SqlFunctions | None = None
@@ -642,7 +643,7 @@ class Database:
         self._held = None if self.path is None else _hold(self.path)
         conn = self.conn
         try:
-            self.guard = harden(conn)
+            self.guard = harden(conn, self)
             # the bound parameters one statement may hold (999 in SQLite before 3.32)
             self.max_parameters = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
@@ -1676,18 +1677,18 @@ class Database:
             self.deadline, self.progress = deadline, handler
             conn.set_progress_handler(_signal_safe(handler[0], self), handler[1])
         if outer_handler is None:
-            self.escaped, self.ended_by_handler = None, False
+            self.escaped.clear()
+            self.ended_by_handler = False
         try:
             yield
         except sqlite3.OperationalError as exc:
             if self.tx_depth and not conn.in_transaction:
                 self._transaction_ended(exc)   # (an interrupted write rolls it all back)
-            escaped = self.escaped
-            if escaped is not None:
+            if self.escaped:
                 # a signal handler's exception (Ctrl-C) ended the statement: the caller's,
                 # not a failure of the statement (its query would go on in the interpreter);
                 # kept for an outer statement, ended by its failing function call
-                raise escaped from None
+                raise self.escaped[0] from None
             if "interrupt" in str(exc):
                 if checks[0] > allowed >= 0:
                     raise SLRTimeout(f"query ran out of its budget of {instructions} SQLite "
@@ -1705,7 +1706,8 @@ class Database:
             raise busy_error(exc, self.path, self.busy_timeout) or exc from None
         finally:
             if outer_handler is None:
-                self.escaped, self.ended_by_handler = None, False
+                self.escaped.clear()
+                self.ended_by_handler = False
             if handler is not outer_handler:
                 self.deadline, self.progress = outer, outer_handler
                 if outer_handler is None:
@@ -1728,7 +1730,7 @@ def _signal_safe(check: Callable[[], int], db: Database) -> Callable[[], int]:
     >>> def raising() -> int:
     ...     raise KeyboardInterrupt
     >>> _signal_safe(lambda: 0, db)(), _signal_safe(raising, db)(), db.escaped
-    (0, 1, KeyboardInterrupt())
+    (0, 1, [KeyboardInterrupt()])
     """
     def checks() -> Iterator[int]:
         answer = 0
@@ -1742,8 +1744,8 @@ def _signal_safe(check: Callable[[], int], db: Database) -> Callable[[], int]:
             except GeneratorExit:
                 return
             except BaseException as exc:   # noqa: BLE001 - kept, raised once it ended
-                if db.escaped is None:
-                    db.escaped = exc
+                if not db.escaped:
+                    db.escaped.append(exc)
                 answer = 1
 
     handler = checks()
@@ -1773,9 +1775,9 @@ def _signal_safe_function(fn: Callable[[Any], Any], db: Database) -> Callable[[A
     ...     return 1 / x
     >>> halve_safely = _signal_safe_function(halve, db)
     >>> halve_safely(2), halve_safely(0) is _NO_VALUE, db.escaped
-    (0.5, True, None)
+    (0.5, True, [])
     >>> halve_safely(3) is _NO_VALUE, db.escaped, halve_safely(4)
-    (True, KeyboardInterrupt(), 0.25)
+    (True, [KeyboardInterrupt()], 0.25)
     """
     def calls() -> Generator[Any, Any, None]:
         result = None
@@ -1790,8 +1792,8 @@ def _signal_safe_function(fn: Callable[[Any], Any], db: Database) -> Callable[[A
             except GeneratorExit:
                 return
             except BaseException as exc:   # noqa: BLE001 - kept, raised once it ended
-                if db.escaped is None:
-                    db.escaped = exc
+                if not db.escaped:
+                    db.escaped.append(exc)
                 result = _NO_VALUE
 
     call = calls()
@@ -1897,11 +1899,12 @@ def run_commit_callbacks(callbacks: CommitCallbacks) -> None:
         raise first
 
 
-def harden(conn: sqlite3.Connection) -> SqlGuard:
+def harden(conn: sqlite3.Connection, db: Database | None = None) -> SqlGuard:
     """:func:`~slr_sql.store.authorizer.harden_connection` and the wrapped built-ins of
     :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets. (Its
     rows are read with :func:`~slr_sql.store.stored_text.fetch_rows`, which reads a text
-    that is no UTF-8 with U+FFFD and a warning, not an error for its whole table.)
+    that is no UTF-8 with U+FFFD and a warning, not an error for its whole table.) ``db``:
+    the store whose connection it is (:func:`register_functions`).
 
     >>> conn = sqlite3.connect(":memory:"); guard = harden(conn)
     >>> conn.execute("SELECT printf('%.*c', 2000000000, 'x')").fetchall()  # at once, not in 9 s
@@ -1912,7 +1915,7 @@ def harden(conn: sqlite3.Connection) -> SqlGuard:
     sqlite3.OperationalError: not authorized to use function: load_extension
     """
     guard = harden_connection(conn)
-    register_functions(conn, bounded_builtins(conn, guard))
+    register_functions(conn, bounded_builtins(conn, guard), db)
     return guard
 
 
@@ -1920,10 +1923,11 @@ def register_functions(conn: sqlite3.Connection, functions: SqlFunctions,
                        db: Database | None = None) -> None:
     """Register every function and aggregate of ``functions`` on one SQLite connection:
     the only place slr_sql registers Python functions (tests/test_sql_functions.py).
-    ``db``: the store whose connection it is; there a function of one argument keeps what a
-    signal handler raises as it is called in ``db.escaped`` (:func:`_signal_safe_function`:
-    Python runs a Ctrl-C's handler in the first Python code that runs, most often such a
-    function called row by row).
+    ``db``: the store whose connection it is; there each function keeps what a signal
+    handler raises as it is called in ``db.escaped`` (Python runs a Ctrl-C's handler in the
+    first Python code that runs, most often a function called row by row, where sqlite3
+    would clear it): wrapped by the C speedups' ``signal_safe`` when built, else the
+    functions of one argument only (:func:`_signal_safe_function`); aggregates are not.
 
     >>> from slr_sql.store.functions import Native, SqlFunction
     >>> twice = SqlFunction("twice", 1, lambda x: 2 * x, on_postgres=Native.INTERPRETER_ONLY)
@@ -1932,9 +1936,13 @@ def register_functions(conn: sqlite3.Connection, functions: SqlFunctions,
     [(42,)]
     """
     for f in functions.functions:
-        conn.create_function(f.name, f.arity, f.fn if db is None or f.arity != 1
-                             else _signal_safe_function(f.fn, db),
-                             deterministic=f.deterministic)
+        fn = f.fn
+        if db is not None:
+            if signal_safe_loop is not None:
+                fn = signal_safe_loop(fn, db.escaped)
+            elif f.arity == 1:
+                fn = _signal_safe_function(fn, db)
+        conn.create_function(f.name, f.arity, fn, deterministic=f.deterministic)
     for a in functions.aggregates:
         conn.create_aggregate(a.name, a.arity, a.cls)
 
