@@ -146,8 +146,9 @@ def test_ctrl_c_met_in_a_function_of_several_arguments_raises_keyboard_interrupt
     """SQLite: a statement calling slr_det (\\==, ==) row by row, where Python most often
     runs the signal's handler; sqlite3 cleared its KeyboardInterrupt there (and again in the
     compiled sub-goal the interpreter then called: only a third Ctrl-C landed). PostgreSQL
-    runs such a goal in the interpreter."""
-    _interrupted_program(str(tmp_path / "robot.db"), "differing", how)
+    runs such a goal in the interpreter. Kept by the C speedups' signal_safe (built wherever
+    a C compiler is: tests/test_speedups.py), used even in a run without them."""
+    _interrupted_program(str(tmp_path / "robot.db"), "differing", how, SLR_SQL_NO_SPEEDUPS="")
 
 
 @pytest.mark.parametrize("goal", ["slow", "counted(N)"])
