@@ -35,6 +35,10 @@
  *       holds it (the cached JSON of atoms), a finite float as repr writes it, an int as
  *       str; anything else (and a str `texts` does not hold) as `fallback(value)` returns
  *       it; the three times as repr(float(t)).
+ *   signal_safe(fn, kept)
+ *       fn as a function SQLite calls, keeping what a signal handler raised as it was
+ *       called (see below); not an encoding loop, and no part of LOOPS_VERSION's contracts:
+ *       the store finds it by name (slr_sql/store/connection.py).
  *
  * `data` is orjson's output: its JSON syntax is trusted, every byte is checked. All are
  * pure functions of their arguments (the byte table is constant). The Python versions stay
@@ -45,6 +49,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <structmember.h>
+#include <stddef.h>
 #include <string.h>
 
 #ifndef Py_T_OBJECT_EX
@@ -668,6 +673,100 @@ done:
     return out;
 }
 
+/* signal_safe(fn, kept): fn as a function SQLite calls (slr_sql/store/connection.py). Python
+ * runs a pending signal's handler (a Ctrl-C's KeyboardInterrupt) at the first Python code
+ * that runs, most often a function a statement calls row by row, where sqlite3 clears what
+ * it raises: the statement fails as if the function had, and the query goes on in the
+ * interpreter. The wrapper runs the pending handlers itself before it calls fn, and keeps
+ * what they raise -- or what fn raises that is no Exception (KeyboardInterrupt, SystemExit:
+ * a signal that came as fn began) -- appended to the list `kept` (when it is empty): the
+ * store raises it once the statement ended. The call fails all the same. */
+typedef struct {
+    PyObject_HEAD
+    PyObject *fn;
+    PyObject *kept;
+    vectorcallfunc vectorcall;
+} SignalSafe;
+
+static PyObject *
+signal_safe_call(PyObject *op, PyObject *const *args, size_t nargsf, PyObject *kwnames)
+{
+    SignalSafe *self = (SignalSafe *)op;
+    PyObject *type, *value, *traceback;
+    if (PyErr_CheckSignals() == 0) {
+        PyObject *result = PyObject_Vectorcall(self->fn, args, nargsf, kwnames);
+        if (result != NULL || PyErr_ExceptionMatches(PyExc_Exception))
+            return result;
+    }
+    PyErr_Fetch(&type, &value, &traceback);
+    PyErr_NormalizeException(&type, &value, &traceback);
+    if (value != NULL) {
+        if (traceback != NULL)
+            PyException_SetTraceback(value, traceback);
+        if (PyList_GET_SIZE(self->kept) == 0 && PyList_Append(self->kept, value) < 0)
+            PyErr_Clear();
+    }
+    PyErr_Restore(type, value, traceback);
+    return NULL;
+}
+
+static int
+signal_safe_traverse(SignalSafe *self, visitproc visit, void *arg)
+{
+    Py_VISIT(self->fn);
+    Py_VISIT(self->kept);
+    return 0;
+}
+
+static int
+signal_safe_clear(SignalSafe *self)
+{
+    Py_CLEAR(self->fn);
+    Py_CLEAR(self->kept);
+    return 0;
+}
+
+static void
+signal_safe_dealloc(SignalSafe *self)
+{
+    PyObject_GC_UnTrack(self);
+    signal_safe_clear(self);
+    PyObject_GC_Del(self);
+}
+
+static PyTypeObject SignalSafeType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "_slr_sql_speedups.SignalSafe",
+    .tp_basicsize = sizeof(SignalSafe),
+    .tp_dealloc = (destructor)signal_safe_dealloc,
+    .tp_vectorcall_offset = offsetof(SignalSafe, vectorcall),
+    .tp_call = PyVectorcall_Call,
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL,
+    .tp_doc = "A function SQLite calls that keeps what a signal handler raised in it.",
+    .tp_traverse = (traverseproc)signal_safe_traverse,
+    .tp_clear = (inquiry)signal_safe_clear,
+};
+
+static PyObject *
+signal_safe(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    SignalSafe *self;
+    if (nargs != 2 || !PyCallable_Check(args[0]) || !PyList_CheckExact(args[1])) {
+        PyErr_SetString(PyExc_TypeError, "signal_safe(fn, kept): a callable and a list");
+        return NULL;
+    }
+    self = PyObject_GC_New(SignalSafe, &SignalSafeType);
+    if (self == NULL)
+        return NULL;
+    Py_INCREF(args[0]);
+    self->fn = args[0];
+    Py_INCREF(args[1]);
+    self->kept = args[1];
+    self->vectorcall = signal_safe_call;
+    PyObject_GC_Track(self);
+    return (PyObject *)self;
+}
+
 static PyMethodDef methods[] = {
     {"number_rows", (PyCFunction)number_rows, METH_O,
      "number_rows(values) -> bool\n\n"
@@ -690,6 +789,9 @@ static PyMethodDef methods[] = {
     {"event_message", (PyCFunction)(void (*)(void))event_message, METH_FASTCALL,
      "event_message(row, keys, texts, fallback) -> bytes\n\n"
      "The JSON message of a stored event row, as EventChannel.message writes it."},
+    {"signal_safe", (PyCFunction)(void (*)(void))signal_safe, METH_FASTCALL,
+     "signal_safe(fn, kept) -> callable\n\n"
+     "fn as a function SQLite calls that keeps what a signal handler raised in it in kept."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -709,6 +811,8 @@ PyInit__slr_sql_speedups(void)
     PyObject *m;
     fill_byte_kinds();
     if (positive_zero == NULL && (positive_zero = PyFloat_FromDouble(0.0)) == NULL)
+        return NULL;
+    if (PyType_Ready(&SignalSafeType) < 0)
         return NULL;
     m = PyModule_Create(&module);
     if (m != NULL && PyModule_AddIntConstant(m, "LOOPS_VERSION", LOOPS_VERSION) < 0) {

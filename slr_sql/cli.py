@@ -1372,9 +1372,11 @@ class Shell:
         next answer on a local store was stopped: then the handler raises nothing, and that
         ``next()`` raises KeyboardInterrupt as the stop ends it (:meth:`_one_at_a_time`) --
         the interpreter at its next check, a statement compiled to SQL at once. Raised by the
-        handler, the KeyboardInterrupt did not reach a statement SQLite runs (an exception
-        raised in its progress handler is cleared: the goal went on in the interpreter, and
-        Ctrl-C did nothing), and one raised inside psycopg's wait for the server could leave
+        handler, the KeyboardInterrupt does not always reach a statement SQLite runs (one
+        raised in a function of several arguments the statement calls is cleared by sqlite3:
+        the goal goes on in the interpreter, and Ctrl-C did nothing; the store keeps one
+        raised in the progress handler or a function of one argument, docs/sql.md), and one
+        raised inside psycopg's wait for the server could leave
         the connection with its statement unread ("another command is already in
         progress"). False (the handler raises) for a served goal's answers, which end with
         the KeyboardInterrupt itself, outside the search (the key after an answer), and for
@@ -2008,8 +2010,9 @@ class ShellInterrupts:
         if self.state == self.RUNNING:
             if self.stop_goal is not None:
                 # a local goal's search is stopped too: raised inside a statement SQLite runs
-                # (its progress handler), the exception below is cleared there and the goal
-                # went on in the interpreter; stopped, the search raises it again itself
+                # (a function of several arguments it calls), the exception below is cleared
+                # there and the goal went on in the interpreter; stopped, the search raises
+                # it again itself
                 self.stop_goal(signum)
             raise ShellTerminated(signum)
         if not self.started:

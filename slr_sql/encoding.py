@@ -103,6 +103,11 @@ event_form_loop: Callable[[list], str | None] | None = getattr(_speedups, "event
 # the live view's per-row cost); None without it: the Python method writes the same bytes.
 event_message_loop: Callable[[tuple, tuple, dict, Callable[[Any], str]], bytes] | None = \
     getattr(_speedups, "event_message", None)
+# Not an encoding loop: a function SQLite calls wrapped so that what a signal handler raises
+# in it is kept for the store (store/connection.py, register_functions); None without it:
+# the store wraps the functions of one argument in Python.
+signal_safe_loop: Callable[[Callable[..., Any], list], Callable[..., Any]] | None = \
+    getattr(_speedups, "signal_safe", None)
 
 __all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
            "NullArgument",

@@ -607,7 +607,14 @@ class KnowledgeBase:
             check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
                                 max_steps=max_steps, wait=wait)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
-            return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
+            pending = self.submit(goal, at=at, args=args, timeout=timeout, robot=robot)
+            try:
+                return pending.result()
+            except BaseException:
+                # (a Ctrl-C in the wait: the query evaluates on a worker thread, whose
+                # statement would hold the store's connection on; the query is dropped)
+                pending.cancel()
+                raise
         if args and limit is None and robot is None:
             key = (goal, tuple(args))
             try:

@@ -255,6 +255,28 @@ class PendingQuery(Future):
         self._released_at: float | None = None  # clock time of the latest release
         self._gs_program: Any = None             # the Program goal_set was computed for
         self._gs_sorted: list = []
+        # set by cancel(): an evaluation under way (on a worker) ends, its compiled
+        # statement included (the store interrupts or cancels it)
+        self._stop = threading.Event()
+
+    def cancel(self) -> bool:
+        """Cancel the query (Future's ``cancel``): it stops waiting, and an evaluation of
+        it under way ends too -- the interpreter at its next check, a compiled statement
+        at once (SQLite's progress handler interrupts it, PostgreSQL's server is sent a
+        cancel) -- so that the store's connection is free for the next query. False once
+        the query was answered (or failed).
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); q = kb.submit("p(X)^T", at=5)
+        >>> q.cancel(), q.cancelled(), kb.pending()
+        (True, True, [])
+        >>> kb.close()
+        """
+        cancelled = super().cancel()
+        if cancelled:
+            self._stop.set()
+            self._sync.store.stop_query(self._stop)
+        return cancelled
 
     def __repr__(self) -> str:
         state = "answered" if self.done() else (
@@ -1276,6 +1298,7 @@ class Synchronizer:
             remaining = max(q._deadline - time.monotonic(), 0.001)
         m = kb.engine.machine(at=q.at, timeout=remaining)
         m.robot = q.robot
+        m.stop = q._stop
         m.synchronized = True  # for engines that bypass the hooks (SQL): do not
         m.on_prev = self._check_prev
         m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
@@ -1569,6 +1592,6 @@ def _try_run(kb: Host, entry: Any, q: PendingQuery) -> list | None:
     from .encoding import Unencodable
 
     try:
-        return entry.run(kb, q.args or {}, q.at, None, q._deadline)
+        return entry.run(kb, q.args or {}, q.at, None, q._deadline, stop=q._stop)
     except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
         return None

@@ -34,11 +34,12 @@ import threading
 import time
 import weakref
 from contextlib import contextmanager
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Generator, Iterable, Iterator
 from urllib.parse import unquote
 
 from ..errors import CLOSED_WHILE_RUNNING, STOPPED_BY_CALLER, SLRError, SLRStoreGone, SLRTimeout, \
     naming_the_store
+from ..encoding import signal_safe_loop
 from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
@@ -600,6 +601,14 @@ class Database:
         # set by stop_queries, before a close: a query's statement still running (which
         # holds the lock the close waits for) ends at its next progress check
         self.stopping = False
+        # what a signal handler raised while SQLite ran a statement (a Ctrl-C's
+        # KeyboardInterrupt), kept by the progress handler that met it (_signal_safe): sqlite3
+        # would clear it; raised once the statement ended (_deadline). And whether one of
+        # our progress handlers asked SQLite to end a statement (a deadline, a budget, a
+        # stop, a close): an "interrupted" statement without it was ended by an exception
+        # that escaped the handler
+        self.escaped: list[BaseException] = []
+        self.ended_by_handler = False
         # the Python functions statements may call (install_functions), on every connection
         self.functions: SqlFunctions | None = None
         # (schema version, in-memory copy of the schema, extra indexes made in it, the
@@ -634,7 +643,7 @@ class Database:
         self._held = None if self.path is None else _hold(self.path)
         conn = self.conn
         try:
-            self.guard = harden(conn)
+            self.guard = harden(conn, self)
             # the bound parameters one statement may hold (999 in SQLite before 3.32)
             self.max_parameters = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
@@ -1537,7 +1546,7 @@ class Database:
         with self.lock:
             self.check_open()
             self.functions = functions
-            register_functions(self.conn, functions)
+            register_functions(self.conn, functions, self)
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None, may_fall_back: bool = False,
@@ -1666,12 +1675,20 @@ class Database:
                 stops)
         if handler is not outer_handler and handler is not None:
             self.deadline, self.progress = deadline, handler
-            conn.set_progress_handler(handler[0], handler[1])
+            conn.set_progress_handler(_signal_safe(handler[0], self), handler[1])
+        if outer_handler is None:
+            self.escaped.clear()
+            self.ended_by_handler = False
         try:
             yield
         except sqlite3.OperationalError as exc:
             if self.tx_depth and not conn.in_transaction:
                 self._transaction_ended(exc)   # (an interrupted write rolls it all back)
+            if self.escaped:
+                # a signal handler's exception (Ctrl-C) ended the statement: the caller's,
+                # not a failure of the statement (its query would go on in the interpreter);
+                # kept for an outer statement, ended by its failing function call
+                raise self.escaped[0] from None
             if "interrupt" in str(exc):
                 if checks[0] > allowed >= 0:
                     raise SLRTimeout(f"query ran out of its budget of {instructions} SQLite "
@@ -1682,14 +1699,106 @@ class Database:
                     raise SLRError(CLOSED_WHILE_RUNNING) from None
                 if stop is not None and stop.is_set():
                     raise SLRError(STOPPED_BY_CALLER) from None
+                if handler is not None and not self.ended_by_handler:
+                    # no handler of ours asked, nothing kept: an exception escaped the
+                    # handler (a signal's, met outside _signal_safe's try): as a Ctrl-C's
+                    raise KeyboardInterrupt from None
             raise busy_error(exc, self.path, self.busy_timeout) or exc from None
         finally:
+            if outer_handler is None:
+                self.escaped.clear()
+                self.ended_by_handler = False
             if handler is not outer_handler:
                 self.deadline, self.progress = outer, outer_handler
                 if outer_handler is None:
                     conn.set_progress_handler(None, 0)
                 else:
-                    conn.set_progress_handler(outer_handler[0], outer_handler[1])
+                    conn.set_progress_handler(_signal_safe(outer_handler[0], self),
+                                              outer_handler[1])
+
+
+def _signal_safe(check: Callable[[], int], db: Database) -> Callable[[], int]:
+    """``check`` as a progress handler that keeps an exception a signal handler raises in it
+    (a Ctrl-C's KeyboardInterrupt, a handler's SystemExit) in ``db.escaped`` and ends the
+    statement, instead of letting it escape into sqlite3, which clears it and ends the
+    statement "interrupted" as if the handler had asked. Python runs pending signal handlers
+    at the first instruction of the Python code sqlite3 calls, before any ``try`` of a
+    plain function; resumed generator code starts inside its ``try``. When ``check`` asks
+    to end the statement, ``db.ended_by_handler`` says so.
+
+    >>> db = Database(None)
+    >>> def raising() -> int:
+    ...     raise KeyboardInterrupt
+    >>> _signal_safe(lambda: 0, db)(), _signal_safe(raising, db)(), db.escaped
+    (0, 1, [KeyboardInterrupt()])
+    """
+    def checks() -> Iterator[int]:
+        answer = 0
+        while True:
+            try:
+                while True:
+                    yield answer
+                    answer = check()
+                    if answer:
+                        db.ended_by_handler = True
+            except GeneratorExit:
+                return
+            except BaseException as exc:   # noqa: BLE001 - kept, raised once it ended
+                if not db.escaped:
+                    db.escaped.append(exc)
+                answer = 1
+
+    handler = checks()
+    next(handler)
+    return handler.__next__
+
+
+class _NoValue:
+    """What a function called from SQL returns instead of raising (sqlite3 cannot store
+    it: the call fails as it would for an exception, "user-defined function raised
+    exception")."""
+
+
+_NO_VALUE = _NoValue()
+
+
+def _signal_safe_function(fn: Callable[[Any], Any], db: Database) -> Callable[[Any], Any]:
+    """``fn`` (of one argument) as a function SQL calls, which keeps an exception a signal
+    handler raises as it is called in ``db.escaped`` (as :func:`_signal_safe` does for a
+    progress handler); the call then fails, as it does when ``fn`` raises an
+    :class:`Exception` of its own.
+
+    >>> db = Database(None)
+    >>> def halve(x: int) -> float:
+    ...     if x == 3:
+    ...         raise KeyboardInterrupt   # (as a signal's handler would, inside fn)
+    ...     return 1 / x
+    >>> halve_safely = _signal_safe_function(halve, db)
+    >>> halve_safely(2), halve_safely(0) is _NO_VALUE, db.escaped
+    (0.5, True, [])
+    >>> halve_safely(3) is _NO_VALUE, db.escaped, halve_safely(4)
+    (True, [KeyboardInterrupt()], 0.25)
+    """
+    def calls() -> Generator[Any, Any, None]:
+        result = None
+        while True:
+            try:
+                while True:
+                    argument = yield result
+                    try:
+                        result = fn(argument)
+                    except Exception:   # noqa: BLE001 - fn's own: the call fails
+                        result = _NO_VALUE
+            except GeneratorExit:
+                return
+            except BaseException as exc:   # noqa: BLE001 - kept, raised once it ended
+                if not db.escaped:
+                    db.escaped.append(exc)
+                result = _NO_VALUE
+
+    call = calls()
+    next(call)
+    return call.send
 
 
 CommitCallbacks = list[tuple[int, Callable[[], None], bool]]
@@ -1790,11 +1899,12 @@ def run_commit_callbacks(callbacks: CommitCallbacks) -> None:
         raise first
 
 
-def harden(conn: sqlite3.Connection) -> SqlGuard:
+def harden(conn: sqlite3.Connection, db: Database | None = None) -> SqlGuard:
     """:func:`~slr_sql.store.authorizer.harden_connection` and the wrapped built-ins of
     :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets. (Its
     rows are read with :func:`~slr_sql.store.stored_text.fetch_rows`, which reads a text
-    that is no UTF-8 with U+FFFD and a warning, not an error for its whole table.)
+    that is no UTF-8 with U+FFFD and a warning, not an error for its whole table.) ``db``:
+    the store whose connection it is (:func:`register_functions`).
 
     >>> conn = sqlite3.connect(":memory:"); guard = harden(conn)
     >>> conn.execute("SELECT printf('%.*c', 2000000000, 'x')").fetchall()  # at once, not in 9 s
@@ -1805,13 +1915,19 @@ def harden(conn: sqlite3.Connection) -> SqlGuard:
     sqlite3.OperationalError: not authorized to use function: load_extension
     """
     guard = harden_connection(conn)
-    register_functions(conn, bounded_builtins(conn, guard))
+    register_functions(conn, bounded_builtins(conn, guard), db)
     return guard
 
 
-def register_functions(conn: sqlite3.Connection, functions: SqlFunctions) -> None:
+def register_functions(conn: sqlite3.Connection, functions: SqlFunctions,
+                       db: Database | None = None) -> None:
     """Register every function and aggregate of ``functions`` on one SQLite connection:
     the only place slr_sql registers Python functions (tests/test_sql_functions.py).
+    ``db``: the store whose connection it is; there each function keeps what a signal
+    handler raises as it is called in ``db.escaped`` (Python runs a Ctrl-C's handler in the
+    first Python code that runs, most often a function called row by row, where sqlite3
+    would clear it): wrapped by the C speedups' ``signal_safe`` when built, else the
+    functions of one argument only (:func:`_signal_safe_function`); aggregates are not.
 
     >>> from slr_sql.store.functions import Native, SqlFunction
     >>> twice = SqlFunction("twice", 1, lambda x: 2 * x, on_postgres=Native.INTERPRETER_ONLY)
@@ -1820,7 +1936,13 @@ def register_functions(conn: sqlite3.Connection, functions: SqlFunctions) -> Non
     [(42,)]
     """
     for f in functions.functions:
-        conn.create_function(f.name, f.arity, f.fn, deterministic=f.deterministic)
+        fn = f.fn
+        if db is not None:
+            if signal_safe_loop is not None:
+                fn = signal_safe_loop(fn, db.escaped)
+            elif f.arity == 1:
+                fn = _signal_safe_function(fn, db)
+        conn.create_function(f.name, f.arity, fn, deterministic=f.deterministic)
     for a in functions.aggregates:
         conn.create_aggregate(a.name, a.arity, a.cls)
 

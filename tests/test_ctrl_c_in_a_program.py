@@ -1,0 +1,158 @@
+"""Ctrl-C (SIGINT) in a Python program while a query's compiled SQL statement runs: the
+KeyboardInterrupt reaches the program at once, the store is unchanged and the knowledge
+base answers the next query. On SQLite the KeyboardInterrupt, raised inside the statement's
+progress handler, was cleared by sqlite3: the statement ended "interrupted" and the goal went
+on in the interpreter for minutes, where only a second Ctrl-C landed.
+
+Each test runs a real Python process over a real store and sends it SIGINT once its
+statement runs."""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+import pexpect
+import pytest
+
+import slr_sql
+
+from test_close_ends_running_queries import DEADLINE, EVENTS, SLOW_BODY, _slow_store
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# Goals of one long statement each (a minute or more of either engine's work): `slow` calls
+# a Python function of one argument (slr_num) row by row, where Python most often runs the
+# signal's handler on SQLite; `counted(N)` calls none (there the handler runs in the
+# statement's progress handler); `differing` calls one of several arguments (slr_det; on
+# SQLite only: PostgreSQL runs it in the interpreter)
+PROGRAM = (f"slow :- {SLOW_BODY.format(started='')}. "
+           "counted(N) :- aggregate_all(count, (p(_)^_, p(_)^_, p(_)^_), N). "
+           "differing :- p(X)^_, p(Y)^_, p(Z)^_, X \\== Y, Y \\== Z, X == Z, X == -1.")
+
+# The program: asks GOAL the way HOW says, reports how the ask ended and how long it took,
+# then asks again and counts the events
+CHILD = r"""
+import sys, time
+import slr_sql
+
+where, goal, how = sys.argv[1:]
+kb = slr_sql.open(where, clock=slr_sql.ManualClock(0.0))
+assert "engine: sql" in kb.explain(goal)
+print("asking", flush=True)
+began = time.monotonic()
+try:
+    if how == "query":
+        kb.query(goal)
+    elif how == "query with a timeout":
+        kb.query(goal, timeout=600)
+    elif how == "solutions":
+        for answer in kb.solutions(goal):
+            pass
+    elif how == "sub-goal":   # a compiled sub-goal the interpreter calls
+        kb.query("member(A, [1]), " + goal)
+    elif how == "synchronized":   # evaluated on a worker thread of the knowledge base
+        kb.query(goal, at=600, wait=True)
+    print("answered", flush=True)
+except KeyboardInterrupt:
+    print(f"KeyboardInterrupt after {time.monotonic() - began:.1f} s", flush=True)
+print("next:", kb.query("p(X)^_, X > %d") , flush=True)
+print("events:", kb.query("findall(X, p(X)^_, L), length(L, N)")[0]["N"], flush=True)
+kb.close()
+print("closed", flush=True)
+""" % (EVENTS - 2)
+
+
+def _cpu_ticks(pid: int) -> int:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return int(fields[11]) + int(fields[12])   # utime + stime
+
+
+def _wait_until_its_statement_runs(child: pexpect.spawn, where: str) -> None:
+    """Until the program's query is inside its long statement (up to DEADLINE): on SQLite,
+    once the program has spent 0.3 s of CPU after it said it asks (planning the statement
+    takes milliseconds); on PostgreSQL, once the server shows another session of the
+    database active for 100 ms."""
+    deadline = time.monotonic() + DEADLINE
+    if not where.startswith("postgresql:"):
+        began, needed = _cpu_ticks(child.pid), 0.3 * os.sysconf("SC_CLK_TCK")
+        while _cpu_ticks(child.pid) - began < needed:
+            assert time.monotonic() < deadline, "the statement did not run"
+            child.expect([pexpect.TIMEOUT], timeout=0.02)
+        return
+    import psycopg
+    active = ("SELECT count(*) FROM pg_stat_activity WHERE datname = current_database() "
+              "AND pid <> pg_backend_pid() AND state = 'active' "
+              "AND clock_timestamp() - query_start > interval '100 milliseconds'")
+    with psycopg.connect(where, autocommit=True) as admin:
+        while not admin.execute(active).fetchone()[0]:
+            assert time.monotonic() < deadline, "the statement did not run"
+            child.expect([pexpect.TIMEOUT], timeout=0.02)
+
+
+def _interrupted_program(where: str, goal: str, how: str, **environment: str) -> None:
+    """Run CHILD over a store at ``where`` (EVENTS p/1 events, PROGRAM), send it SIGINT once
+    its statement runs, and check what it says: the KeyboardInterrupt well before the
+    statement would end, the next query answered, the events all there; and the store
+    holds them when opened again."""
+    kb = _slow_store(where, signalled=False)[0]
+    kb.load(PROGRAM)
+    kb.mark_complete("p/1", 1000)   # (the synchronized query's history is complete)
+    kb.close()
+    env = dict(os.environ, PYTHONPATH=str(ROOT), **environment)
+    child = pexpect.spawn(sys.executable, ["-c", CHILD, where, goal, how], env=env,
+                          cwd=str(ROOT), encoding="utf-8", timeout=DEADLINE)
+    try:
+        child.expect("asking\r\n")
+        _wait_until_its_statement_runs(child, where)
+        child.kill(signal.SIGINT)
+        # (the statement alone runs a minute or more: an answer or a wait past DEADLINE
+        # means the Ctrl-C did not stop it)
+        child.expect(r"(answered|KeyboardInterrupt after ([0-9.]+) s)\r\n")
+        assert child.match.group(1).startswith("KeyboardInterrupt"), child.before
+        assert float(child.match.group(2)) < DEADLINE
+        child.expect(r"next: ([^\r\n]*)\r\n")
+        assert child.match.group(1) == "[{'X': %d}]" % (EVENTS - 1)
+        child.expect(r"events: (\d+)\r\n")
+        assert int(child.match.group(1)) == EVENTS
+        child.expect("closed\r\n")
+        child.expect(pexpect.EOF)
+    finally:
+        child.close(force=True)
+    assert child.exitstatus == 0, child.before
+    with slr_sql.open(where) as again:
+        assert again.query("findall(X, p(X)^_, L), length(L, N)")[0]["N"] == EVENTS
+
+
+@pytest.mark.parametrize("how", ["query", "query with a timeout", "solutions", "sub-goal",
+                                 "synchronized"])
+@pytest.mark.parametrize("goal", ["slow", "counted(N)"])
+def test_ctrl_c_during_a_compiled_statement_raises_keyboard_interrupt_at_once(backend, goal,
+                                                                               how):
+    """The program gets the KeyboardInterrupt well before the statement would end, the next
+    query answers, and the store holds its events; on both backends, for a query, a query
+    with a timeout (PostgreSQL's statement_timeout in a transaction of its own), the
+    answers one at a time, a compiled sub-goal the interpreter calls, and a synchronized
+    query (its statement runs on a worker thread: the KeyboardInterrupt came at once, but
+    the statement ran on, and the next query waited for the store's connection)."""
+    _interrupted_program(backend, goal, how)
+
+
+@pytest.mark.parametrize("how", ["query", "sub-goal"])
+def test_ctrl_c_met_in_a_function_of_several_arguments_raises_keyboard_interrupt(tmp_path,
+                                                                                 how):
+    """SQLite: a statement calling slr_det (\\==, ==) row by row, where Python most often
+    runs the signal's handler; sqlite3 cleared its KeyboardInterrupt there (and again in the
+    compiled sub-goal the interpreter then called: only a third Ctrl-C landed). PostgreSQL
+    runs such a goal in the interpreter. Kept by the C speedups' signal_safe (built wherever
+    a C compiler is: tests/test_speedups.py), used even in a run without them."""
+    _interrupted_program(str(tmp_path / "robot.db"), "differing", how, SLR_SQL_NO_SPEEDUPS="")
+
+
+@pytest.mark.parametrize("goal", ["slow", "counted(N)"])
+def test_ctrl_c_without_the_c_speedups_raises_keyboard_interrupt(tmp_path, goal):
+    """SQLite without the C speedups (SLR_SQL_NO_SPEEDUPS=1): the progress handler and the
+    functions of one argument (slr_num) keep the KeyboardInterrupt in Python."""
+    _interrupted_program(str(tmp_path / "robot.db"), goal, "query", SLR_SQL_NO_SPEEDUPS="1")
