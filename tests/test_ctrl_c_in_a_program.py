@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -156,3 +157,50 @@ def test_ctrl_c_without_the_c_speedups_raises_keyboard_interrupt(tmp_path, goal)
     """SQLite without the C speedups (SLR_SQL_NO_SPEEDUPS=1): the progress handler and the
     functions of one argument (slr_num) keep the KeyboardInterrupt in Python."""
     _interrupted_program(str(tmp_path / "robot.db"), goal, "query", SLR_SQL_NO_SPEEDUPS="1")
+
+
+COUNTING = ("WITH RECURSIVE r(n) AS (SELECT 1 UNION ALL SELECT n + 1 FROM r WHERE n < 200000) "
+            "SELECT count(*) FROM r")
+
+
+class _SignalledWhileChecked(threading.Event):
+    """A query's stop that sends this process SIGUSR1 the first time the statement's
+    progress handler looks at it (run_compiled looks once before): Python then runs the
+    signal's handler there, inside the progress handler, as it does for a signal that comes
+    while SQLite runs no function."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.looks = 0
+
+    def is_set(self) -> bool:
+        self.looks += 1
+        if self.looks == 2:
+            os.kill(os.getpid(), signal.SIGUSR1)
+        return super().is_set()
+
+
+def test_a_signal_handler_querying_the_store_inside_the_progress_handler():
+    """A signal's handler that queries the store (a status report on SIGUSR1) as it runs
+    inside a compiled statement's progress handler: its statement is answered and the
+    statement it interrupted goes on to its answer. The progress handler, a generator, could
+    not be resumed by the handler's statement (which keeps the handler of the statement it
+    runs inside): SQLite ended that statement, which raised KeyboardInterrupt though no
+    Ctrl-C came, and so did the statement it interrupted."""
+    from slr_sql.store import EventStore
+
+    store = EventStore(None)
+    reports = []
+    previous = signal.signal(signal.SIGUSR1,
+                             lambda signum, frame: reports.append(store.sql(COUNTING)))
+    try:
+        stop = _SignalledWhileChecked()
+        try:
+            rows = store.run_compiled(COUNTING, {}, may_fall_back=True, stop=stop)
+        except KeyboardInterrupt:
+            pytest.fail("a KeyboardInterrupt, though no Ctrl-C came")
+        assert rows == [(200000,)]
+    finally:
+        signal.signal(signal.SIGUSR1, previous)
+    assert stop.looks > 2 and reports == [(["count(*)"], [(200000,)])]
+    store.close()

@@ -598,6 +598,9 @@ class Database:
         # statement running now: what _deadline puts back when an inner statement's own
         # limit ends
         self.progress: tuple[Callable[[], int], int, bool] | None = None
+        # the progress handler SQLite calls now (_signal_safe's, of self.progress[0]): put
+        # back as it is once an inner statement ends, its generator mid-run perhaps
+        self.progress_call: Callable[[], int] | None = None
         # set by stop_queries, before a close: a query's statement still running (which
         # holds the lock the close waits for) ends at its next progress check
         self.stopping = False
@@ -1673,9 +1676,14 @@ class Database:
                 stop is not None and stop.is_set()) or (limit is not None and limit()) else 0,
                 STOP_CHECK_INSTRUCTIONS if outer_handler is None else outer_handler[1],
                 stops)
-        if handler is not outer_handler and handler is not None:
+        outer_call = self.progress_call
+        if handler is not None:
+            # (a handler of its own even where the outer's holds: an inner statement may run
+            # inside the outer's progress handler -- a signal's handler that queries the
+            # store -- whose generator cannot be resumed while it runs)
             self.deadline, self.progress = deadline, handler
-            conn.set_progress_handler(_signal_safe(handler[0], self), handler[1])
+            self.progress_call = _signal_safe(handler[0], self)
+            conn.set_progress_handler(self.progress_call, handler[1])
         if outer_handler is None:
             self.escaped.clear()
             self.ended_by_handler = False
@@ -1708,13 +1716,16 @@ class Database:
             if outer_handler is None:
                 self.escaped.clear()
                 self.ended_by_handler = False
-            if handler is not outer_handler:
+            if handler is not None:
                 self.deadline, self.progress = outer, outer_handler
-                if outer_handler is None:
+                self.progress_call = outer_call
+                if outer_handler is None or outer_call is None:
                     conn.set_progress_handler(None, 0)
                 else:
-                    conn.set_progress_handler(_signal_safe(outer_handler[0], self),
-                                              outer_handler[1])
+                    # (the outer's own object: replaced by a new one, the one that may be
+                    # running now -- the signal's handler above it returns into it -- would
+                    # lose its last owner)
+                    conn.set_progress_handler(outer_call, outer_handler[1])
 
 
 def _signal_safe(check: Callable[[], int], db: Database) -> Callable[[], int]:
