@@ -11,7 +11,8 @@ import math
 import re
 from typing import Any, Callable
 
-from .terms import Atom, Struct, Var, deref, format_term, int_text, quoted_text, to_python
+from .terms import INFIX_OPS, PREFIX_OPS, Atom, Struct, Var, deref, format_term, int_text, \
+    quoted_text, to_python
 
 __all__ = ["answer_bindings", "query_variable_names", "value_text", "binding_text", "answer_text",
            "rebuilt"]
@@ -204,16 +205,18 @@ def value_text(value: Any, digits: int | None = None, priority: int = 1200) -> s
 
 def binding_text(value: Any) -> str:
     """A binding's value as SWI-Prolog's top level writes it after ``X = ``: as an operand
-    of ``=`` (priority 699: the conjunction ``(a, b)`` is written ``(a,b)``), so that
-    ``X = Value`` reads back as the same binding. (An atom that is an operator is written
-    as it is, ``X = table``, where swipl writes ``X = (table)``: docs/printed_text.md.)
+    of ``=`` (priority 699: the conjunction ``(a, b)`` is written ``(a,b)``), an atom that is
+    an operator in brackets (``X = (table)``, ``X = (-)``: bare, ``X = table, Y = 1`` is a
+    syntax error), so that the answer reads back as its bindings.
 
     >>> from slr_sql.terms import Atom, Struct
     >>> binding_text(Struct(",", (Atom("a"), Atom("b")))), binding_text(Atom(","))
-    ('(a,b)', "','")
+    ('(a,b)', "(',')")
     >>> binding_text([Struct(":-", (Atom("a"), Atom("b")))]), binding_text(1e22)
     ('[(a:-b)]', '1.0e+22')
     """
+    if type(value) is Atom and (value in INFIX_OPS or value in PREFIX_OPS):
+        return "(" + format_term(value) + ")"
     return value_text(value, priority=699)
 
 

@@ -168,7 +168,7 @@ def test_ctrl_c_stops_a_long_goal_and_gives_the_prompt_back(store):
 def test_answers_come_one_at_a_time_semicolon_for_more_enter_to_stop(store):
     child = spawn_shell(store)
     child.sendline("seg(O, L)^T.")
-    child.expect(r"O = cup1, L = table, T = 1\.0")
+    child.expect(r"O = cup1, L = \(table\), T = 1\.0")
     press(child, ";")
     child.expect(r" ;\r\n")
     child.expect(r"O = cup2, L = shelf, T = 2\.0")
@@ -361,7 +361,7 @@ def test_ctrl_c_typed_with_enter_stops_the_goal_before_it_starts(store):
     assert "ran" not in child.before.replace("write(ran)", "")
     child.expect(PROMPT)
     child.sendline("seg(cup1, L)^T.")       # the shell goes on; no Ctrl-C is left over
-    child.expect(r"L = table, T = 1\.0")
+    child.expect(r"L = \(table\), T = 1\.0")
     press(child, "\r")
     child.expect(PROMPT)
     leave(child)
@@ -603,7 +603,7 @@ def test_a_comment_after_the_full_stop_ends_the_goal_and_a_full_stop_inside_one_
                   "X = a\x00b.")                    # no token: its error, not a wait
     assert r.returncode == 0, r.stderr
     assert r.stderr.startswith("<shell>:1:6: unexpected character") and r.stderr.count("\n") == 3
-    assert r.stdout.splitlines() == ["L = table, T = 1.0 .", "X = 1 .", "X = 2, Y = 3 .",
+    assert r.stdout.splitlines() == ["L = (table), T = 1.0 .", "X = 1 .", "X = 2, Y = 3 .",
                                      "true.", "N = a .", "X = 'a. b' .", "X = 'a.\\nb' ."]
 
 
@@ -703,9 +703,9 @@ def test_at_nan_is_refused_at_once_in_the_queries_words_and_the_view_stays(store
     assert r.stderr == "error: at must be a number of seconds, not nan\n"
     assert r.stdout.splitlines() == [
         "stream view: at 1",
-        "X = cup1, P = table, T = 1.0 .",
+        "X = cup1, P = (table), T = 1.0 .",
         "stream view: at inf",
-        "X = cup1, P = table, T = 1.0 ;",
+        "X = cup1, P = (table), T = 1.0 ;",
         "X = cup2, P = shelf, T = 2.0 ;",
         "false.",
     ]
@@ -716,7 +716,7 @@ def test_at_that_is_no_number_is_refused_in_words_and_the_view_stays(store):
     r = run_piped(store, "at 1", "at soon", "seg(X, P)^T.")
     assert r.returncode == 0, r.stderr
     assert r.stderr == "error: at takes a number of seconds (or none), not soon\n"
-    assert r.stdout.splitlines() == ["stream view: at 1", "X = cup1, P = table, T = 1.0 ."]
+    assert r.stdout.splitlines() == ["stream view: at 1", "X = cup1, P = (table), T = 1.0 ."]
 
 
 class PipedShell:
@@ -782,7 +782,7 @@ def test_piped_goal_with_endless_answers_prints_its_first_at_once_and_reads_the_
         shell.send(";")
         assert shell.expect("N = 1").startswith(" ;\nL = [")
         shell.send("seg(O, L)^T.")        # no response: the next goal, the answers stop
-        assert shell.expect("O = cup1, L = table, T = 1.0") == " .\nO = cup1, L = table, T = 1.0"
+        assert shell.expect("O = cup1, L = (table), T = 1.0") == " .\nO = cup1, L = (table), T = 1.0"
         out, errors = shell.end()         # the end of the input stops the answers too
     finally:
         shell.kill()

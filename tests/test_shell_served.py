@@ -266,7 +266,7 @@ def test_a_server_without_solutions_is_asked_with_one_query(tmp_path):
                     assert time.monotonic() < end
             assert list(kb.solutions("member(X, [1, 2])")) == [{"X": 1}, {"X": 2}]
         r = slr("shell", url, stdin="seg(O, L)^T.\n")
-        assert (r.returncode, r.stdout, r.stderr) == (0, "O = cup1, L = table, T = 1.0 .\n",
+        assert (r.returncode, r.stdout, r.stderr) == (0, "O = cup1, L = (table), T = 1.0 .\n",
                                                       "")
     finally:
         proc.terminate()

@@ -67,7 +67,7 @@ def test_a_terminated_shell_gives_the_terminal_back_cooked(store, signum, where)
         parent.expect("started\r\n")
     else:
         parent.sendline("seg(O, L)^T.")
-        parent.expect(r"O = cup1, L = table, T = 1\.0")
+        parent.expect(r"O = cup1, L = \(table\), T = 1\.0")
     wait_for_terminal(parent, raw=where != "running a goal")
     os.kill(pid, signum)
     parent.expect(r"STATUS (-?\d+) ICANON (\d) ECHO (\d)")
