@@ -1023,8 +1023,9 @@ class _Op:
 
 
 # Work items of _Writer.write, besides (term, priority, operand) triples.
-_PUT, _SPACE, _PREFIX_END, _LIST_REST, _UNGRAY = (
-    _Op("put"), _Op("space"), _Op("prefix end"), _Op("list rest"), _Op("ungray"))
+_PUT, _SPACE, _PREFIX_END, _LIST_REST, _UNGRAY, _INFIX = (
+    _Op("put"), _Op("space"), _Op("prefix end"), _Op("list rest"), _Op("ungray"),
+    _Op("infix operator"))
 
 
 _VARIABLE_NAME = re.compile(r"[A-Z_][A-Za-z0-9_]*\Z")
@@ -1116,6 +1117,14 @@ class _Writer:
                     put(item[1])
                 elif kind is _SPACE:
                     self.space()
+                elif kind is _INFIX:
+                    # a symbolic operator parted from its left operand by a space (it would
+                    # glue to it: `# - 1`, `... - 0`) is parted from its right one too, as
+                    # SWI-Prolog writes it; `1-2`, `a- -1` stay as they are
+                    before = len(self.out)
+                    put(item[1])
+                    if len(self.out) - before == 2:
+                        self.space()
                 elif kind is _LIST_REST:
                     self._list_rest(item[1], todo, gray)
                 elif kind is _UNGRAY:
@@ -1208,7 +1217,7 @@ class _Writer:
                 todo.append((_PUT, format_atom(name, self.quoted, self.escapes)))
                 todo.append((_SPACE,))
             else:
-                todo.append((_PUT, format_atom(name, self.quoted, self.escapes)))
+                todo.append((_INFIX, format_atom(name, self.quoted, self.escapes)))
             todo.append((args[0], lp, True))
             return
         elif n == 1 and name in PREFIX_OPS and name not in ("|", ","):

@@ -71,6 +71,11 @@ EDGES += [list(range(1, 10)), list(range(1, 11)), partial_list(list(range(1, 9))
           partial_list(list(range(1, 10)), Atom("t")), [list(range(1, 21))] * 2,
           [Atom("a"), [Atom("b"), [Atom("c"), [Atom("d"), [Atom("e"), [Atom("f")]]]]]],
           "x" * 300, [["y" * 250]]]
+# a symbolic operator parted from its left operand by a space is parted from its right one
+# too: `- ... - 0` (the cut, a symbol-char atom, on its left), `@ - 0`, `a- -1`
+EDGES += [[0, 0, [], 0, 0, 0, 0, Struct("-", (Struct("-", (0,)), 0))],
+          Struct("-", (Atom("@"), 0)), Struct("<", (Atom("#"), "s")),
+          Struct("-", (Atom("a"), -1)), Struct("-", (Atom("-"), 1))]
 
 
 def compare_with_swipl(values: list) -> None:
@@ -126,6 +131,7 @@ def test_the_shells_answers_are_cut_as_swipls_top_level_cuts_them(tmp_path):
     (Struct("f", (list(range(1, 31)),)), "f([1,2,3,4,5,6,7,8|...])"),
     (nested(11, Atom("x")), "f(g(h(i(j(k(l(m(n(o(...))))))))))"),
     ("z" * 500, '"' + "z" * 500 + '"'),
+    (nested(8, Struct("-", (Struct("-", (0,)), 0))), "f(g(h(i(j(k(l(m(- ... - 0))))))))"),
 ])
 def test_examples(value, text):
     assert value_text(abbreviated(value)) == text
