@@ -36,8 +36,12 @@ PROGRAM = (f"slow :- {SLOW_BODY.format(started='')}. "
 # The program: asks GOAL the way HOW says, reports how the ask ended and how long it took,
 # then asks again and counts the events
 CHILD = r"""
-import sys, time
+import signal, sys, time
 import slr_sql
+
+# (Python's own Ctrl-C handler, as a program started from a terminal has it: a program that a
+# background job starts, a CI run's, inherits SIGINT ignored, and Python then keeps it so)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 where, goal, how = sys.argv[1:]
 kb = slr_sql.open(where, clock=slr_sql.ManualClock(0.0))
