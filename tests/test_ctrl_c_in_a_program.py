@@ -12,7 +12,6 @@ import os
 import signal
 import sys
 import threading
-import time
 from pathlib import Path
 
 import pexpect
@@ -21,6 +20,7 @@ import pytest
 import slr_sql
 
 from test_close_ends_running_queries import DEADLINE, EVENTS, SLOW_BODY, _slow_store
+from test_shell import _wait_until_its_statement_runs
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -68,33 +68,6 @@ print("events:", kb.query("findall(X, p(X)^_, L), length(L, N)")[0]["N"], flush=
 kb.close()
 print("closed", flush=True)
 """ % (EVENTS - 2)
-
-
-def _cpu_ticks(pid: int) -> int:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return int(fields[11]) + int(fields[12])   # utime + stime
-
-
-def _wait_until_its_statement_runs(child: pexpect.spawn, where: str) -> None:
-    """Until the program's query is inside its long statement (up to DEADLINE): on SQLite,
-    once the program has spent 0.3 s of CPU after it said it asks (planning the statement
-    takes milliseconds); on PostgreSQL, once the server shows another session of the
-    database active for 100 ms."""
-    deadline = time.monotonic() + DEADLINE
-    if not where.startswith("postgresql:"):
-        began, needed = _cpu_ticks(child.pid), 0.3 * os.sysconf("SC_CLK_TCK")
-        while _cpu_ticks(child.pid) - began < needed:
-            assert time.monotonic() < deadline, "the statement did not run"
-            child.expect([pexpect.TIMEOUT], timeout=0.02)
-        return
-    import psycopg
-    active = ("SELECT count(*) FROM pg_stat_activity WHERE datname = current_database() "
-              "AND pid <> pg_backend_pid() AND state = 'active' "
-              "AND clock_timestamp() - query_start > interval '100 milliseconds'")
-    with psycopg.connect(where, autocommit=True) as admin:
-        while not admin.execute(active).fetchone()[0]:
-            assert time.monotonic() < deadline, "the statement did not run"
-            child.expect([pexpect.TIMEOUT], timeout=0.02)
 
 
 def _interrupted_program(where: str, goal: str, how: str, **environment: str) -> None:
