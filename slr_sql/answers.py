@@ -14,7 +14,7 @@ from typing import Any, Callable
 from .terms import INFIX_OPS, PREFIX_OPS, Atom, Struct, Var, deref, format_term, int_text, \
     quoted_text, to_python
 
-__all__ = ["answer_bindings", "query_variable_names", "value_text", "binding_text", "answer_text",
+__all__ = ["answer_bindings", "AnswerVariables", "query_variable_names", "value_text", "binding_text", "answer_text",
            "rebuilt"]
 
 
@@ -53,16 +53,24 @@ def answer_bindings(names: list, frame: list, deadline: float | None = None,
             if tv is Var and free.count(id(v)) < 2:
                 continue
             if variables is None:   # (a value that may hold a variable: most hold none)
-                variables = _AnswerVariables(names if named is None else named, frame)
+                variables = AnswerVariables(names if named is None else named, frame)
             answer[name] = to_python(v, deadline, variables)
         else:
             answer[name] = to_python(v, deadline)
     return answer
 
 
-class _AnswerVariables:
+class AnswerVariables:
     """The variable an answer holds for each unbound variable of the engine's (see
-    :func:`answer_bindings`), made when first asked for: most answers hold none."""
+    :func:`answer_bindings`), made when first asked for: most answers hold none. The
+    compiled plans name their answers' variables with it too (planner.compile_goal).
+
+    >>> from slr_sql.terms import Var
+    >>> Y, fresh = Var("Y"), Var("Y")          # the query's Y, and a clause's Y
+    >>> names = AnswerVariables([("Y", 0)], [Y])
+    >>> names(Y), names(fresh).name.startswith("_G"), names(fresh) is names(fresh)
+    (Var('Y'), True, True)
+    """
 
     __slots__ = ("named", "frame", "given")
 
@@ -170,7 +178,6 @@ def value_text(value: Any, digits: int | None = None, priority: int = 1200) -> s
     >>> value_text(Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
     ('cup1', '"never-observed"', '[1,2.5]')
     """
-
     if digits is None:
         kind = type(value)
         if kind is Atom and _PLAIN_ATOM.match(value):
@@ -236,7 +243,6 @@ def answer_text(answer: dict[str, Any]) -> str:
     >>> answer_text({"X": Struct("f", (shared, shared, other)), "L": [other, Var()]})
     'X = f(_A,_A,_B), L = [_B,_]'
     """
-
     # X = Y answers {'X': Var('Y'), 'Y': Var('Y')}; like Prolog, do not print "Y = Y".
     shown = [(name, value) for name, value in answer.items()
              if not (isinstance(value, Var) and str(value) == name)]
@@ -273,7 +279,6 @@ def _fresh_variables_named(shown: list[tuple[str, Any]],
     """``shown`` with each unnamed variable renamed as SWI-Prolog's top level names it, in
     the order they are printed: ``_`` for one that occurs once, else the next of ``_A``,
     ``_B``, ... (``_A1`` after ``_Z``) that no variable of the answer is named already."""
-
     order: list[str] = []
     counts: dict[str, int] = {}
     todo: list[Any] = [value for _, value in reversed(shown)]

@@ -29,7 +29,7 @@ from . import sqlcompile
 
 from .encoding import Unencodable, decode, encode
 from .encoding import load_json, term_from_json
-from .answers import query_variable_names
+from .answers import AnswerVariables
 from .plans import instantiate
 from .program import Slot, Template, build
 from .sqlcompile import Col, ColRef, Compiler, Fallback, Part, resolve
@@ -521,9 +521,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
         index: dict[str, int] = {}
         # the answer's unbound variables named as the interpreter's answers name them
         # (answers.answer_bindings): after the query's variables holding them, else new
-        named = plan.named or names
-        given = query_variable_names(named, frame)
-        renamed: dict[int, Var] = {}
+        variables = AnswerVariables(plan.named or names, frame)
 
         def recipe(t):
             t = deref(t)
@@ -537,14 +535,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
             if type(t) is Struct:
                 return Struct(t.name, tuple(recipe(a) for a in t.args))
             if type(t) is Var:
-                new = renamed.get(id(t))
-                if new is None:
-                    name = given.get(id(t))
-                    new = Var() if name is None else Var(name)
-                    while name is None and any(new.name == n for n, _ in named):
-                        new = Var()      # (a query's own _G2000)
-                    renamed[id(t)] = new
-                return new
+                return variables(t)
             return t
 
         printed: list[str] = []

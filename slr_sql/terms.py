@@ -564,12 +564,14 @@ def to_python(t: Any, deadline: float | None = None,
 def _labels_kept(factored: Struct, variables: Callable[[Var], Var]) -> Callable[[Var], Var]:
     """``variables`` for the ``@(Template, [S_1 = Value, ...])`` of a cyclic term: the labels
     ``S_1``, ... stand for subterms, not for variables of the term, and keep their names."""
-    labels = set()
-    equations = factored.args[1]
-    while type(equations) is Struct and equations.name == "." and len(equations.args) == 2:
-        labels.add(id(equations.args[0].args[0]))
-        equations = equations.args[1]
+    labels = _cycle_labels(factored)
     return lambda v: v if id(v) in labels else variables(v)
+
+
+def _cycle_labels(factored: Struct) -> set[int]:
+    """``id()`` of the labels ``S_1``, ... of a cyclic term's ``@(Template, [S_1 = Value,
+    ...])`` (:func:`factorize_cycles`)."""
+    return {id(deref(pair.args[0])) for pair in list_items(factored.args[1])[0]}
 
 
 def _to_python(t: Any, deadline: float | None,
@@ -1309,7 +1311,7 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     except _CyclicTerm:
         factorized = factorize_cycles(t, deadline)
         if var_names is not None and cycle_names:
-            labels = {id(deref(pair.args[0])) for pair in list_items(factorized.args[1])[0]}
+            labels = _cycle_labels(factorized)
             var_names = (lambda names: lambda v: v.name if id(v) in labels else names(v))(var_names)
         w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names,
                     ignore_ops)
