@@ -484,3 +484,21 @@ def test_complex_events_of_one_add_are_stored_in_the_store_order_of_their_parts(
                 ("y", 0.0, 5.0), ("x", 0.0, 5.0)]
         assert [sub.get(timeout=30)["W"] for _ in range(2)] == ["y", "x"]
         sub.close()
+
+
+@pytest.mark.parametrize("goal", [
+    "prev(v(K, X)^T, nan)", "prev(v(K, X)^T, [0, nan])", "next(v(K, X)^T, [-inf, nan])",
+    "X0 is nan, prev(v(K, X)^T, X0)", "last(K)^nan", "prev(v(K, X)^T, B)",
+    "next(v(K, X)^T, [-inf, B])", "last(K)^B"])
+def test_a_nan_time_bounds_no_event_on_both_backends(backend, goal):
+    """No end time is at or before NaN (SQLite binds it as NULL): prev and next with a NaN
+    bound find nothing. PostgreSQL's float order puts NaN above every number, so there
+    ``t_end <= NaN`` held for every row and prev found the latest event of all."""
+    with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
+        kb.load("last(K)^T :- prev(v(K, _)^_, T).")
+        kb.add_many(["v(a, 1)^1", "v(b, 2)^[1, 3]", "v(c, 3)^1.0e308"])
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            assert kb.query(goal, args={"B": math.nan} if "B" in goal else None) == []
+            assert len(kb.query("prev(v(K, X)^T, 5)")) == 1   # (the same lookup, a number)
+
