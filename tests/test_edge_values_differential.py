@@ -502,3 +502,24 @@ def test_a_nan_time_bounds_no_event_on_both_backends(backend, goal):
             assert kb.query(goal, args={"B": math.nan} if "B" in goal else None) == []
             assert len(kb.query("prev(v(K, X)^T, 5)")) == 1   # (the same lookup, a number)
 
+
+def test_an_integer_is_a_time_by_its_exact_value_on_both_backends(backend):
+    """An integer matches a stored time when it equals the float exactly, as the
+    interpreter compares them: 2**53 + 1 is no time (the nearest float is 2.0**53). A
+    compiled statement on PostgreSQL rounded the integer to a double first (from Python,
+    from a stored value, in an event rule's join of a data argument with a time), and
+    matched it with the event at 2.0**53."""
+    near, exact = 2 ** 53 + 1, 2 ** 53
+    with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
+        kb.load("r(X) <- a(X) and b(_)^X.\nr2(X) <- a(X) and b(_)^[X, _].\n"
+                "at_stamp(N, K) :- w(N)^_, v(K)^[_, N].")
+        kb.add_many([f"a({near})^1", f"a({exact})^2", f"v(k)^{float(exact)}",
+                     f"b(1)^{float(exact)}", f"w({near})^1", f"w({exact})^2"])
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            for stamp in ("[S, B]", "[B, E]", "B"):
+                assert kb.query(f"v(K)^{stamp}", args={"B": near}) == [], stamp
+                assert [a["K"] for a in kb.query(f"v(K)^{stamp}", args={"B": exact})] == ["k"]
+            assert kb.query("at_stamp(N, K)") == [{"N": exact, "K": "k"}]
+            for head in ("r", "r2"):
+                assert [a["X"] for a in kb.query(f"{head}(X)^[_, _]")] == [exact], head

@@ -304,8 +304,9 @@ class AltSQL:
             return f"({self.dialect.key_equal(a.sql, b.sql)} AND {typeof(a.sql)} = {typeof(b.sql)}" + \
                 (f" AND {sign})" if sign else ")")
         d, t = (a, b) if a.kind == "data" else (b, a)
-        # times match by value (a time 5.0 and a data argument 5 are the same instant)
-        return f"({self.dialect.number(d.sql)} = {t.sql} AND {typeof(d.sql)} {_NUMERIC})"
+        # times match by value (a time 5.0 and a data argument 5 are the same instant),
+        # exactly: 2**53 + 1 is no time (the query printers' time_equal)
+        return self.dialect.time_equal(d.sql, t.sql)
 
     def _bind(self, term: Any, ref: Ref, refs: dict, out: list) -> None:
         """Constrain the column ``ref`` by the pattern term at that place."""
