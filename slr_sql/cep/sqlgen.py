@@ -50,6 +50,7 @@ _EQ = {"==": True, "=": True, "\\==": False, "\\=": False}
 # no match, never counted), on a server that calls no Python: the Python side decides it
 # before the other where goals, as Prolog evaluates it, an error no match too (AltSQL.quiet)
 QUIET = object()
+_INT64 = 1 << 63
 _NUMERIC = "IN ('integer', 'real')"
 # Arithmetic pushed into SQL (``T3 - T1 =< 5``): + and - over bound variables and numbers,
 # computed by SQL only where it gives Prolog's value -- integers small enough that no sum
@@ -405,9 +406,14 @@ class AltSQL:
             return None if ref is None else (ref.sql, ref.kind)
         if type(t) in (int, float) and t == t:
             try:
-                encode(t)
+                stored = encode(t)
             except Unencodable:
                 return None
+            if type(t) is int and not -_INT64 <= t < _INT64:
+                # an integer beyond 64 bits is no SQL number (SQLite refused the parameter:
+                # every add the rule decided failed): a stored value, which the comparison
+                # hands to slr_cep_cmp, as Prolog evaluates it
+                return self._param(self._stored(stored)), "data"
             return self._param(t), "num"
         return None
 
