@@ -65,6 +65,24 @@ def test_sql_takes_question_mark_and_named_parameters_on_both_backends(backend):
         assert rows == [("c",)]
         _, rows = kb.sql("SELECT count(*) FROM p WHERE arg1 LIKE '%'")   # a % as written
         assert rows[0][0] == 3
+        # a ? or :name inside a comment is no parameter (PostgreSQL took the comment's for
+        # one: "the query has 2 placeholders but 1 parameters were passed")
+        _, rows = kb.sql("SELECT arg1 /* after ?, 50% :t */ FROM p WHERE t_end > ? "
+                         "ORDER BY t_end", [2.0])
+        assert rows == [("c",)]
+        _, rows = kb.sql("SELECT arg1 FROM p /* :t? */ WHERE t_end = :t", {"t": 1.0})
+        assert rows == [("a",)]
+
+
+def test_sql_parameters_are_not_read_inside_postgresql_strings_and_comments(postgres_url):
+    """PostgreSQL's own kinds of text hold a ? or :name that is no parameter: a dollar-quoted
+    string, an escape string whose quote is escaped by a backslash, a nested comment."""
+    with slr_sql.open(postgres_url) as kb:
+        _, rows = kb.sql("SELECT $$?:a$$, $tag$ ? $x$ $tag$, E'it\\'s ?:a', ? "
+                         "/* a /* nested ? */ comment ? */", [1])
+        assert rows == [("?:a", " ? $x$ ", "it's ?:a", 1)]
+        _, rows = kb.sql("SELECT E'\\\\', :a, e'%'", {"a": 2})
+        assert rows == [("\\", 2, "%")]
 
 
 VIEWS_PROGRAM = """

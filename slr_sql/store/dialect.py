@@ -392,15 +392,35 @@ class PostgresDialect(PostgresQueryPrinter):
         return value
 
 
+_NAMED = re.compile(r":([A-Za-z_][A-Za-z0-9_]*)")
+# a dollar quote's opening tag: $$ or $tag$ (a tag does not start with a digit: $1 is a
+# positional parameter)
+_DOLLAR = re.compile(r"\$(?:[A-Za-z_\x80-\uffff][A-Za-z0-9_\x80-\uffff]*)?\$")
+
+
 def _format_params(sql: str) -> str:
+    r"""``sql`` with slr_sql's parameters (``?``, ``:name``) in psycopg's style and every
+    other ``%`` doubled. What PostgreSQL reads as text is left as it is: strings (``'..'``,
+    escape strings ``E'..\'..'``, dollar-quoted ``$$..$$``, ``$tag$..$tag$``), quoted names,
+    ``--`` and (nested) ``/* */`` comments, and ``::`` casts.
+
+    >>> print(_format_params("SELECT /* ? 5% */ ?, $$:a$$, E'\\'?', arg1::text FROM p WHERE x = :a"))
+    SELECT /* ? 5%% */ %s, $$:a$$, E'\'?', arg1::text FROM p WHERE x = %(a)s
+    """
     out = []
     i = 0
     n = len(sql)
     while i < n:
         c = sql[i]
         if c == "'" or c == '"':
+            # (an escape string, E'..', takes a backslash before its quote)
+            escapes = c == "'" and i > 0 and sql[i - 1] in "eE" and (
+                i == 1 or not (sql[i - 2].isalnum() or sql[i - 2] in "_$"))
             j = i + 1
             while j < n:
+                if escapes and sql[j] == "\\":
+                    j += 2
+                    continue
                 if sql[j] == c:
                     if j + 1 < n and sql[j + 1] == c:
                         j += 2
@@ -414,6 +434,23 @@ def _format_params(sql: str) -> str:
             j = n if j < 0 else j
             out.append(sql[i:j].replace("%", "%%"))
             i = j
+        elif c == "/" and sql.startswith("/*", i):
+            depth, j = 1, i + 2   # PostgreSQL's block comments nest
+            while j < n and depth:
+                if sql.startswith("/*", j):
+                    depth, j = depth + 1, j + 2
+                elif sql.startswith("*/", j):
+                    depth, j = depth - 1, j + 2
+                else:
+                    j += 1
+            out.append(sql[i:j].replace("%", "%%"))
+            i = j
+        elif c == "$" and (m := _DOLLAR.match(sql, i)) is not None and not (
+                i > 0 and (sql[i - 1].isalnum() or sql[i - 1] in "_$")):
+            j = sql.find(m.group(0), m.end())
+            j = n if j < 0 else j + len(m.group(0))
+            out.append(sql[i:j].replace("%", "%%"))
+            i = j
         elif c == "?":
             out.append("%s")
             i += 1
@@ -422,7 +459,7 @@ def _format_params(sql: str) -> str:
                 out.append("::")
                 i += 2
                 continue
-            m = re.compile(r":([A-Za-z_][A-Za-z0-9_]*)").match(sql, i)
+            m = _NAMED.match(sql, i)
             if m:
                 out.append(f"%({m.group(1)})s")
                 i = m.end()
