@@ -3328,6 +3328,8 @@ def _prev(m, a):
         start_ge, t = None, _time_value(a[1])
     else:
         start_ge, t = iv
+    if t != t or start_ge != start_ge:
+        return   # NaN: no time is at, before or after it (no history to wait for either)
     if m.on_prev is not None:
         m.on_prev(name, n, t)
     store = m.engine.events
@@ -3352,6 +3354,8 @@ def _prev(m, a):
 def _next(m, event, lo_t, hi_t):
     name, n, args, s, e = _event_pattern(event, "next")
     lo, hi = _time_value(lo_t), _time_value(hi_t)
+    if lo != lo or hi != hi:
+        return   # NaN: no time is at, before or after it (no history to wait for either)
     if m.on_next is not None:
         m.on_next(name, n, lo, hi, args, s, e)  # sync: the full pattern, for in_order
     store = m.engine.events

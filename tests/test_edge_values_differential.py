@@ -493,14 +493,21 @@ def test_complex_events_of_one_add_are_stored_in_the_store_order_of_their_parts(
 def test_a_nan_time_bounds_no_event_on_both_backends(backend, goal):
     """No end time is at or before NaN (SQLite binds it as NULL): prev and next with a NaN
     bound find nothing. PostgreSQL's float order puts NaN above every number, so there
-    ``t_end <= NaN`` held for every row and prev found the latest event of all."""
+    ``t_end <= NaN`` held for every row and prev found the latest event of all. A
+    synchronized query waited for ever, on both backends."""
     with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
         kb.load("last(K)^T :- prev(v(K, _)^_, T).")
         kb.add_many(["v(a, 1)^1", "v(b, 2)^[1, 3]", "v(c, 3)^1.0e308"])
+        args = {"B": math.nan} if "B" in goal else None
         for sql in (True, False):
             kb.sql_enabled = sql
-            assert kb.query(goal, args={"B": math.nan} if "B" in goal else None) == []
+            assert kb.query(goal, args=args) == []
             assert len(kb.query("prev(v(K, X)^T, 5)")) == 1   # (the same lookup, a number)
+        # synchronized, it reads no history, so it waits for none (it waited for v/2 to be
+        # complete up to NaN, which no mark and no clock reach)
+        pending = kb.submit(goal, at=5.0, args=args)
+        kb.add("fullyUpdated(v/2)^100")
+        assert pending.result(timeout=30) == []
 
 
 def test_an_integer_is_a_time_by_its_exact_value_on_both_backends(backend):
