@@ -41,8 +41,8 @@ from ..errors import CLOSED_WHILE_RUNNING, STOPPED_BY_CALLER, SLRError, SLRStore
     naming_the_store
 from ..encoding import signal_safe_loop
 from ..lockorder import ordered_lock
-from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
-    harden_connection
+from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, READ_ONLY_VALUE_COST, \
+    SqlGuard, harden_connection
 from .bounded_builtins import bounded_builtins
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
@@ -1959,9 +1959,10 @@ def register_functions(conn: sqlite3.Connection, functions: SqlFunctions,
 
 
 def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
-    """Every row of a read-only statement, or an SLRError once its strings and blobs add up
-    to more than :data:`READ_ONLY_RESULT_BYTES` (a statement repeating a large value over
-    many rows would otherwise fill the memory before its time limit)."""
+    """Every row of a read-only statement, or an SLRError once its strings and blobs, with
+    :data:`READ_ONLY_VALUE_COST` bytes for each value, add up to more than
+    :data:`READ_ONLY_RESULT_BYTES` (a statement repeating a large value over many rows, or
+    many values over many rows, would otherwise fill the memory before its time limit)."""
     rows: list[tuple] = []
     size = 0
     while True:
@@ -1969,14 +1970,16 @@ def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
         if not batch:
             return rows
         for row in batch:
+            size += READ_ONLY_VALUE_COST * len(row)
             for value in row:
                 if type(value) is str or type(value) is bytes:
                     size += len(value)
         if size > READ_ONLY_RESULT_BYTES:
             cursor.close()
             raise SLRError(f"sql: the result of a read-only statement is larger than "
-                           f"{READ_ONLY_RESULT_BYTES >> 20} MiB of text and blobs: ask for "
-                           f"fewer rows (LIMIT) or columns")
+                           f"{READ_ONLY_RESULT_BYTES >> 20} MiB of text and blobs (each value "
+                           f"counted as {READ_ONLY_VALUE_COST} bytes besides its text): ask "
+                           f"for fewer rows (LIMIT) or columns")
         rows.extend(batch)
 
 
