@@ -405,7 +405,10 @@ def _json_args(args: list) -> list:
     except RecursionError:
         raise BadLine("bad argument: nested too deeply") from None
     except (ValueError, TypeError) as exc:
-        raise BadLine(f"bad argument: {exc}") from None
+        # (Python's advice for an integer of more than 4,300 digits names
+        # sys.set_int_max_str_digits: said in the user's words, as kb.add says it)
+        from .plans import python_words
+        raise BadLine(f"bad argument: {python_words(exc)}") from None
     return items
 
 
