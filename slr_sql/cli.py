@@ -2378,6 +2378,8 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
                 try:
                     answer = sub.get(timeout=0.2)
                 except slr_sql.SLRTimeout:
+                    if sub.closed:   # its end, not a wait: a where condition out of its limit
+                        raise
                     continue
                 if answer is None:       # until reached
                     break

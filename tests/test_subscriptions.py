@@ -819,6 +819,21 @@ def test_cli_errors_are_words_and_exit_1(tmp_path):
     assert r.returncode == 1 and "no such store" in r.stderr and "Traceback" not in r.stderr
 
 
+def test_cli_ends_with_the_error_of_a_condition_out_of_its_limit(tmp_path):
+    """The subscription ends with an SLRTimeout, the class of a get() that waited 0.2 s for
+    nothing, which the command took for one and waited on for ever, saying nothing."""
+    path = str(tmp_path / "endless.db")
+    with _open(path) as kb:
+        kb.add("p(1)^1")
+    r = subprocess.run([sys.executable, "-m", "slr_sql", "subscribe", path, "p(X)^T",
+                        "--where", "repeat, fail", "--since", "0"], capture_output=True,
+                       text=True, cwd=str(ROOT), env=_env(), timeout=120)
+    assert r.returncode == 1, r.stderr
+    assert "error: the subscription's where condition did not end within its limit" in \
+        r.stderr and "Traceback" not in r.stderr
+    assert r.stdout == ""
+
+
 # -- the JSON encoding of answers ----------------------------------------------------------------
 
 terms = st.recursive(
