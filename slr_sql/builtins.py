@@ -1369,12 +1369,20 @@ _CHARS_OF_TYPE: dict[tuple[str, int], Any] = {
 
 def _code_of(t: Any) -> Any:
     """The code of a character argument: a one-character atom or string, or a code;
-    ``end_of_file`` (or -1) is -1."""
+    ``end_of_file`` (or -1) is -1. A text of one character is one too, as SWI-Prolog reads
+    it: a list of one character or one code (``[a]``, ``[0'a]``)."""
     tt = type(t)
     if tt is Atom and t == "end_of_file":
         return -1
     if (tt is Atom or tt is String) and len(t) == 1 and t != "[]":
         return ord(t)
+    if tt is Struct and t.name == "." and len(t.args) == 2 and _is_nil(deref(t.args[1])):
+        x = deref(t.args[0])
+        if type(x) is Atom and len(x) == 1 and x != "[]":
+            return ord(x)
+        if type(x) is int and 0 <= x <= 0x10FFFF:
+            return x
+        raise type_error("character", t)
     if tt is int:
         if t < -1:
             raise type_error("character", t)

@@ -784,6 +784,12 @@ GOALS = [
     'char_type(X, to_lower(1))',
     'char_type(a, upper(f(x)))',
     'char_type(X, upper(f(x)))',
+    # a text of one character is a character, as SWI-Prolog reads it: [x], [0'x] (the class's
+    # argument too); any other list is the type error, naming the whole list
+    'char_type([x], T)', "code_type([0'x], alpha)", 'char_type([0], T)', 'char_type(X, upper([a]))',
+    "char_type(a, to_lower([0'a]))", "code_type([0'a], to_upper(U))", 'char_type([x, y], alpha)',
+    'char_type([a|_], alpha)', 'char_type([-1], end_of_file)', 'char_type([[]], alpha)',
+    'char_type([1114112], alpha)', 'char_type(["a"], alpha)',
     'code_type(X, to_lower(-1))',
     'char_type(97, alpha)',
     'char_type("a", alpha)',
