@@ -3156,6 +3156,14 @@ def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
     it comes, so its error comes before any a later solution of the goal would throw."""
     kind = spec.name
     best: list = []
+    # the library's clause head is aggregate_all(max(X, W), Goal, max(Max, Witness)): the
+    # result is max(Max, Witness) before the goal runs (a goal sharing it sees that); a
+    # result that is none goes to the library's general clause, which evaluates each
+    # solution's X (X1 is X) and then fails
+    result = Struct(kind, (Var("_Max"), Var("_Witness")))
+    if not m.unify(out, result):
+        return m.push_collect(spec.args[0], goal, lambda m, r, nxt: False, nxt,
+                              _raising_in(evaluate, _pi("is", 2)), caller=_AGGREGATE_ALL)
 
     def each(found) -> None:
         found = deref(found)
@@ -3174,7 +3182,7 @@ def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
     def finish(m, results, nxt):
         if not best:
             return False
-        return nxt if m.unify(out, Struct(kind, (best[0].args[0], best[0].args[1]))) else False
+        return nxt if m.unify(result, Struct(kind, (best[0].args[0], best[0].args[1]))) else False
 
     return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt, each,
                           caller=_AGGREGATE_ALL)
