@@ -152,7 +152,10 @@ def _div(a, b):
             raise evaluation_error("zero_divisor")
         if a % b == 0:
             return a // b
-        return a / b
+        # as SWI-Prolog (prefer_rationals=false): each integer made a float, then divided;
+        # not the exact quotient rounded, which differs beyond 2**53 (-1 / 9007199254740993),
+        # and an integer beyond the floats overflows (3 / 10**400)
+        return float(a) / float(b)
     if type(b) is float and b - b != 0.0:
         if b == b:
             # over an infinity (SWI-Prolog): an integer is the integer 0, a zero takes the

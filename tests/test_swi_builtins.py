@@ -373,6 +373,10 @@ GOALS = [
     'X is atan2(1, 0)',
     'X is atan2(0, 0)',
     'X is 7 / 2',
+    # two integers that do not divide: each made a float, then divided (beyond 2**53 that is
+    # not the exact quotient rounded), and an integer beyond the floats overflows
+    'X is -1 / 9007199254740993', 'X is 9007199254740993 / 7', 'X is 3 / 10**400',
+    'X is (10**400 + 1) / 10**399', 'X is (2**1024 - 2**970 - 1) / 3', 'X is 10**400 / 10**399',
     'X is 6 / 2',
     'X is -6 / 4',
     'X is cot(1)',
