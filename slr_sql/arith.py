@@ -135,14 +135,19 @@ def _finite(x: float) -> float:
     return x
 
 
-def _float_args(f):
+def _float_args(f, promote: bool = True):
     """A float function of SWI-Prolog's: each float operand is checked (left first) before
-    it is applied (sin(inf) is float_overflow, not undefined; exp(-inf) too)."""
+    it is applied (sin(inf) is float_overflow, not undefined; exp(-inf) too), and with
+    ``promote`` each integer operand is made a float first, as SWI-Prolog does, so one
+    beyond the floats overflows (log(2**1100), sqrt(-(2**1100)): Python's math.log would
+    take the integer as it is)."""
     def g(*args):
         for a in args:
             if type(a) is float:
                 _finite(a)
-        return f(*args)
+            elif promote and type(a) is int:
+                float(a)   # OverflowError: float_overflow
+        return f(*(float(a) if promote and type(a) is int else a for a in args))
     return g
 
 
@@ -436,7 +441,7 @@ UNARY = {
     "integer": _round,
     "float": _float_args(float),
     "float_integer_part": _float_args(
-        lambda a: a if type(a) is int else math.copysign(float(math.trunc(a)), a)),
+        lambda a: a if type(a) is int else math.copysign(float(math.trunc(a)), a), promote=False),
     "float_fractional_part": _fractional_part,
     "\\": lambda a: ~_int_required(a),
     "msb": _msb,

@@ -377,6 +377,10 @@ GOALS = [
     # not the exact quotient rounded), and an integer beyond the floats overflows
     'X is -1 / 9007199254740993', 'X is 9007199254740993 / 7', 'X is 3 / 10**400',
     'X is (10**400 + 1) / 10**399', 'X is (2**1024 - 2**970 - 1) / 3', 'X is 10**400 / 10**399',
+    # a float function makes each integer operand a float first (left first): one beyond
+    # the floats overflows, before the function looks at its sign
+    'X is log(2**1100)', 'X is log(-(2**1100))', 'X is sqrt(-(2**1100))',
+    'X is atan2(2**1100, nan)', 'X is atan2(nan, 2**1100)', 'X is float_integer_part(2**1100)',
     'X is 6 / 2',
     'X is -6 / 4',
     'X is cot(1)',
