@@ -324,10 +324,12 @@ def _minmax(pick_first):
 
 
 def _copysign(a, b):
-    # SWI-Prolog: an integer magnitude stays an integer (copysign(1, -0.0) is -1)
+    # SWI-Prolog: an integer magnitude stays an integer (copysign(1, -0.0) is -1), and an
+    # integer sign is only its sign (no float of it: copysign(1, -(2**1100)) is -1)
+    negative = b < 0 if type(b) is int else math.copysign(1.0, b) < 0
     if type(a) is int:
-        return -abs(a) if math.copysign(1.0, b) < 0 else abs(a)
-    return math.copysign(a, b)
+        return -abs(a) if negative else abs(a)
+    return math.copysign(a, -1.0 if negative else 1.0)
 
 
 def _fractional_part(a):

@@ -381,6 +381,8 @@ GOALS = [
     # the floats overflows, before the function looks at its sign
     'X is log(2**1100)', 'X is log(-(2**1100))', 'X is sqrt(-(2**1100))',
     'X is atan2(2**1100, nan)', 'X is atan2(nan, 2**1100)', 'X is float_integer_part(2**1100)',
+    # copysign takes only the sign of an integer second operand (no float of it)
+    'X is copysign(-2, 2**1100)', 'X is copysign(1.5, -(2**1100))', 'X is copysign(inf, -(2**1100))',
     'X is 6 / 2',
     'X is -6 / 4',
     'X is cot(1)',
