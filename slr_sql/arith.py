@@ -233,14 +233,14 @@ def _pow_float(a, b):
         if b < 0:
             raise evaluation_error("zero_divisor")
         return 0
-    if type(a) is float:
-        _finite(a)
-    if type(b) is float:
-        _finite(b)
-    if a < 0 and b != int(b):
+    # each operand checked, an integer made a float (beyond the floats: float_overflow,
+    # before a negative base's fraction is looked at), left first
+    fa = _finite(a) if type(a) is float else float(a)
+    fb = _finite(b) if type(b) is float else float(b)
+    if fa < 0 and fb != int(fb):
         raise evaluation_error("undefined")   # C's pow: a negative number to a fraction
     try:
-        return float(a) ** float(b)
+        return fa ** fb
     except ZeroDivisionError:
         raise evaluation_error("zero_divisor")
 

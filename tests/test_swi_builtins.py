@@ -383,6 +383,9 @@ GOALS = [
     'X is atan2(2**1100, nan)', 'X is atan2(nan, 2**1100)', 'X is float_integer_part(2**1100)',
     # copysign takes only the sign of an integer second operand (no float of it)
     'X is copysign(-2, 2**1100)', 'X is copysign(1.5, -(2**1100))', 'X is copysign(inf, -(2**1100))',
+    # ** and ^ with a float make an integer operand a float before a negative base's
+    # fraction is looked at
+    'X is -(2**1100) ** 0.5', 'X is -(2**1100) ^ 1.5', 'X is -(2**1100) ** nan',
     'X is 6 / 2',
     'X is -6 / 4',
     'X is cot(1)',
