@@ -170,10 +170,14 @@ def _div(a, b):
             return math.copysign(0.0, b) if a == 0 else a / b
         if type(a) is float:
             _finite(a)   # inf / nan: the infinity's overflow first
+        else:
+            float(a)     # an integer beyond the floats: its overflow first (OverflowError)
         raise evaluation_error("undefined")
     if b == 0:
         if type(a) is float:
             _finite(a)
+        else:
+            float(a)     # (2**1100) / 0.0: the integer's overflow first, as SWI-Prolog
         # a zero over zero is no number (SWI-Prolog: undefined), anything else over zero
         # a division by zero
         raise evaluation_error("undefined" if a == 0 else "zero_divisor")
@@ -380,8 +384,12 @@ def _natural(a):
 
 def _getbit(a, b):
     _int_required(a), _int_required(b)    # (both types first, as SWI-Prolog)
-    a = _natural(a)
-    return (a >> _natural(b)) & 1
+    # then, as SWI-Prolog, the index's sign, and an index beyond 64 bits is bit 0 of any
+    # value (getbit(-2, 2**63) is 0); only then the value's sign
+    b = _natural(b)
+    if b >= 1 << 63:
+        return 0
+    return (_natural(a) >> b) & 1
 
 
 def _atanh(a):
