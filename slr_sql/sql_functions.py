@@ -204,25 +204,41 @@ def _compare(op: str, a: Any, b: Any, decoded: bool = False) -> int:
     """``slr_cep_cmp(op, a, b)``: the comparison ``A op B`` of two stored values as Prolog
     evaluates it (big integers, arithmetic atoms such as ``pi``, expressions); an error is
     false."""
-    from .arith import evaluate
-
     try:
         if not decoded:
             a, b = decode(a), decode(b)
+    except Exception:  # (not a stored value: no match)
+        return 0
+    return int(compare_terms(op, a, b))
+
+
+def compare_terms(op: str, a: Any, b: Any) -> bool:
+    """The arithmetic comparison ``A op B`` (``<``, ``=:=``, ...) of two ground terms as
+    Prolog evaluates it, an error (a type error, an overflow) being false: how an event
+    rule's statement decides a comparison of its ``where`` goal (``slr_cep_cmp``,
+    ``slr_cep_arith``), and the Python side on a server that calls no Python from SQL.
+
+    >>> from slr_sql.terms import Atom, Struct
+    >>> compare_terms("<", Struct("+", (1, 2)), 4), compare_terms("<", Atom("a"), 4)
+    (True, False)
+    """
+    from .arith import evaluate
+
+    try:
         x, y = evaluate(a), evaluate(b)
         if op == "<":
-            return int(x < y)
+            return x < y
         if op == ">":
-            return int(x > y)
+            return x > y
         if op == "=<":
-            return int(x <= y)
+            return x <= y
         if op == ">=":
-            return int(x >= y)
+            return x >= y
         if op == "=:=":
-            return int(x == y)
-        return int(x != y)
+            return x == y
+        return x != y
     except Exception:  # a type error in Prolog: the candidate does not match
-        return 0
+        return False
 
 
 @lru_cache(maxsize=256)

@@ -105,6 +105,44 @@ def test_postgres_keeps_and_derives_what_sqlite_does(pg_database, buffers, ops, 
             kb.close()
 
 
+
+@pytest.mark.parametrize("pattern", ["p(f(X), X)", "p([X, _], X)", "p([X, 1.0], _)",
+                                     "p(g(1.0, K), _)", "p(g(X, K), X)"])
+@pytest.mark.parametrize("installed", ["before the events", "after the events"])
+def test_count_buffers_indexed_inside_a_compound_keep_what_sqlite_does(pg_database, pattern,
+                                                                       installed):
+    """A count buffer whose key lies inside a compound gets a partial index over the rows it
+    governs. Its predicate named slr_json_same (a variable both whole and inside a compound)
+    or slr_json_float (a float inside one): SQL functions that call the store's other
+    helpers by their bare names, which CREATE INDEX does not find from PostgreSQL 17 on (it
+    runs with search_path = pg_catalog, pg_temp), so every add of the type failed with "the
+    store failed (function slr_typeof(text) does not exist)", and so did a buffer installed
+    over stored rows."""
+    events = ["p(f(1), 1)^1", "p(f(1), 1)^2", "p(f(2), 1)^3", "p([1, 1.0], 1)^4",
+              "p([1, 1.0], 2)^5", "p([2, 1.0], 2)^6", "p(g(1.0, k), 1.0)^7",
+              "p(g(1.0, k), 1.0)^8", "p(g(1, k), 1)^9", "p(g(1, k), 1)^10", "p(1, f(1))^11",
+              "p([5, x], 5)^12", "p([5, y], 5)^13"]
+    url = in_schema(pg_database, f"example{next(_schemas)}")
+    stores = [slr_sql.open(None, clock=ManualClock(0.0)),
+              slr_sql.open(url, clock=ManualClock(0.0))]
+    try:
+        for kb in stores:
+            if installed == "before the events":
+                kb.add_buffer(pattern, keep_last=1)
+                assert kb.add_many(events[:5]) == []
+                assert [kb.add(event) for event in events[5:]] == [None] * 8
+            else:
+                assert kb.add_many(events) == []
+                kb.add_buffer(pattern, keep_last=1)
+                assert kb.add_many(["p(f(3), 3)^14", "p([3, 1.0], 3)^15"]) == []
+        sqlite, postgres = (contents(kb) for kb in stores)
+        assert postgres == sqlite
+        assert sqlite["buffers"][0][2] > 0   # (the buffer pruned)
+    finally:
+        for kb in stores:
+            kb.close()
+
+
 def test_concurrent_writers_keep_the_count_of_a_key(postgres_url):
     """Two connections add events of one key of a count buffer while the first's transaction
     is open: the second waits for it and prunes what it stored (without the buffer's lock,

@@ -132,3 +132,31 @@ def test_a_where_raising_midway_through_a_decision_round_spoils_only_its_match(
     local = _where_raising(str(tmp_path / "s.db"), policy)
     assert local == ([(1, 1.0, 2.0), (3, 5.0, 6.0)], 1, 0)
     assert _where_raising(postgres_url, policy) == local
+
+
+def _compared_in_where(where: str, policy: str, goal: str) -> tuple:
+    with slr_sql.open(where, clock=ManualClock(0.0)) as kb:
+        kb.load(f":- consumption({policy}).\n:- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n"
+                f"r(X, Y) <- a(X)^T1 seq b(Y)^T2 where ({goal}).\n")
+        kb.add_many(["a(1)^1", "a(x)^2", "a(f(1))^3", "a(100000000000000000000001)^4",
+                     "a(1.0e300)^5", "a(pi)^6", "b(0)^7", "b(1.0e308)^8"])
+        kb.clock.set(100.0)
+        derived = [(r["X"], r["Y"], r["S"], r["E"]) for r in kb.query("r(X, Y)^[S, E]")]
+        info = kb.event_rules()[0]
+    return derived, info["errors"], info["last_error"]
+
+
+@pytest.mark.parametrize("goal", ["X < 5", "X =\\= Y", "X + 1 > Y", "X - T2 < 1.0e300",
+                                  "100000000000000000000000 =< X", "X > 100000000000000000000000"])
+@pytest.mark.parametrize("policy", ["unrestricted", "recent"])
+def test_a_where_comparison_of_a_non_number_is_no_match_on_both_engines(postgres_url, tmp_path,
+                                                                        policy, goal):
+    """A where comparison of the pattern's values is decided in SQLite's statement, a value
+    that is no plain number by slr_cep_cmp / slr_cep_arith as Prolog evaluates it, a type
+    error (an atom, f(1)) there no match and no error of the rule. PostgreSQL, which calls
+    no Python from SQL, ran the comparison as a where goal, and counted each such candidate
+    as the rule's error: the same complex events, other counts. An integer beyond 64 bits in
+    the comparison was a parameter SQLite refused, and every add the rule decided failed."""
+    local = _compared_in_where(str(tmp_path / "s.db"), policy, goal)
+    assert local[0] and local[1:] == (0, None)
+    assert _compared_in_where(postgres_url, policy, goal) == local

@@ -484,3 +484,42 @@ def test_complex_events_of_one_add_are_stored_in_the_store_order_of_their_parts(
                 ("y", 0.0, 5.0), ("x", 0.0, 5.0)]
         assert [sub.get(timeout=30)["W"] for _ in range(2)] == ["y", "x"]
         sub.close()
+
+
+@pytest.mark.parametrize("goal", [
+    "prev(v(K, X)^T, nan)", "prev(v(K, X)^T, [0, nan])", "next(v(K, X)^T, [-inf, nan])",
+    "X0 is nan, prev(v(K, X)^T, X0)", "last(K)^nan", "prev(v(K, X)^T, B)",
+    "next(v(K, X)^T, [-inf, B])", "last(K)^B"])
+def test_a_nan_time_bounds_no_event_on_both_backends(backend, goal):
+    """No end time is at or before NaN (SQLite binds it as NULL): prev and next with a NaN
+    bound find nothing. PostgreSQL's float order puts NaN above every number, so there
+    ``t_end <= NaN`` held for every row and prev found the latest event of all."""
+    with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
+        kb.load("last(K)^T :- prev(v(K, _)^_, T).")
+        kb.add_many(["v(a, 1)^1", "v(b, 2)^[1, 3]", "v(c, 3)^1.0e308"])
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            assert kb.query(goal, args={"B": math.nan} if "B" in goal else None) == []
+            assert len(kb.query("prev(v(K, X)^T, 5)")) == 1   # (the same lookup, a number)
+
+
+def test_an_integer_is_a_time_by_its_exact_value_on_both_backends(backend):
+    """An integer matches a stored time when it equals the float exactly, as the
+    interpreter compares them: 2**53 + 1 is no time (the nearest float is 2.0**53). A
+    compiled statement on PostgreSQL rounded the integer to a double first (from Python,
+    from a stored value, in an event rule's join of a data argument with a time), and
+    matched it with the event at 2.0**53."""
+    near, exact = 2 ** 53 + 1, 2 ** 53
+    with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
+        kb.load("r(X) <- a(X) and b(_)^X.\nr2(X) <- a(X) and b(_)^[X, _].\n"
+                "at_stamp(N, K) :- w(N)^_, v(K)^[_, N].")
+        kb.add_many([f"a({near})^1", f"a({exact})^2", f"v(k)^{float(exact)}",
+                     f"b(1)^{float(exact)}", f"w({near})^1", f"w({exact})^2"])
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            for stamp in ("[S, B]", "[B, E]", "B"):
+                assert kb.query(f"v(K)^{stamp}", args={"B": near}) == [], stamp
+                assert [a["K"] for a in kb.query(f"v(K)^{stamp}", args={"B": exact})] == ["k"]
+            assert kb.query("at_stamp(N, K)") == [{"N": exact, "K": "k"}]
+            for head in ("r", "r2"):
+                assert [a["X"] for a in kb.query(f"{head}(X)^[_, _]")] == [exact], head

@@ -265,6 +265,26 @@ def test_a_failing_condition_ends_the_subscription_with_its_error(kb):
     assert sub.closed
 
 
+@pytest.mark.parametrize("condition", ["repeat, fail", "between(1, inf, _), fail"])
+def test_an_endless_condition_ends_its_subscription_not_every_delivery(
+        kb, monkeypatch, condition):
+    """A condition runs on the delivery thread all subscriptions share: one that never ends
+    ran there for ever, and no subscription of the knowledge base (on a server, no client's)
+    got another answer. It now ends its own subscription with an SLRTimeout at its budget."""
+    monkeypatch.setattr(subscriptions.matching, "WHERE_MAX_STEPS", 20_000)
+    endless = kb.subscribe("hostile(X)^T", where=condition, since=0)
+    other = kb.subscribe("ok(X)^T", since=0)
+    kb.add("hostile(1)^1")
+    kb.add("ok(1)^2")
+    assert xs(take(other, 1)) == [1]
+    with pytest.raises(slr_sql.SLRTimeout, match=r"^the subscription's where condition did "
+                                                 r"not end within its limit \(.*20000"):
+        endless.get(timeout=DEADLINE)
+    assert endless.closed
+    kb.add("ok(2)^3")
+    assert xs(take(other, 1)) == [2]
+
+
 def test_times_match_by_value_and_point_patterns_bind_the_end(kb):
     at5 = kb.subscribe("p(X)^5", since=0)
     interval = kb.subscribe("p(X)^[S, E]", since=0)

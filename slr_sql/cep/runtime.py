@@ -223,11 +223,11 @@ class RuleRuntime:
             self.alts.append(sql)
             residual = None
             reads = False
-            if sql.residual:
-                in_residual = {id(v) for g in sql.residual for v in term_vars(g)}
+            if sql.residual or sql.quiet:
+                in_residual = {id(v) for g in sql.quiet + sql.residual for v in term_vars(g)}
                 inputs = [v for v in sql.value_vars if id(v) in in_residual]
                 outputs = [v for v in term_vars(self.rule.head) if id(v) not in sql.refs]
-                residual = Residual(sql.residual, inputs, outputs)
+                residual = Residual(sql.residual, inputs, outputs, sql.quiet)
                 reads = bool(residual.analyse(eng.kb.program, eng.known_types())
                              - {self.head_key})
             self.residuals.append(residual)
@@ -254,7 +254,8 @@ class RuleRuntime:
         other head arguments constants: ``(columns, their readers, apply, head)``. None
         when the terms' path must run."""
         eng = self.eng
-        if eng.store.dialect.from_column is not None or residual.unknown or residual.reads:
+        if eng.store.dialect.from_column is not None or residual.unknown or residual.reads \
+                or residual.quiet:
             return None
         shape = residual.plain_function(eng.kb.engine)
         if shape is None:
@@ -1592,6 +1593,10 @@ class EventRules:
             if alt.pushed:
                 lines.append("    where, in SQL: " + ", ".join(format_term(g)
                                                                for g in alt.pushed))
+            if alt.quiet:
+                lines.append("    where, first, per candidate in Python (SQLite decides it in "
+                             "SQL; an error is no match): "
+                             + ", ".join(format_term(g) for g in alt.quiet))
             if alt.residual:
                 how = "reads the store: decided once its goal set and prev/next are complete " \
                       "up to the match's end" if rt.reads_store[n] else \

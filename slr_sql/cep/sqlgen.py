@@ -45,6 +45,12 @@ __all__ = ["Ref", "AltSQL", "anchor_index", "index_name", "render"]
 
 _CMP = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
 _EQ = {"==": True, "=": True, "\\==": False, "\\=": False}
+# what _push gives for a comparison SQLite decides in its statement, a value it cannot
+# compare exactly by the Python functions slr_cep_cmp and slr_cep_arith (an error there is
+# no match, never counted), on a server that calls no Python: the Python side decides it
+# before the other where goals, as Prolog evaluates it, an error no match too (AltSQL.quiet)
+QUIET = object()
+_INT64 = 1 << 63
 _NUMERIC = "IN ('integer', 'real')"
 # Arithmetic pushed into SQL (``T3 - T1 =< 5``): + and - over bound variables and numbers,
 # computed by SQL only where it gives Prolog's value -- integers small enough that no sum
@@ -202,6 +208,7 @@ class AltSQL:
     negs: list = field(default_factory=list)
     residual: list = field(default_factory=list)
     pushed: list = field(default_factory=list)
+    quiet: list = field(default_factory=list)      # comparisons decided first in Python (QUIET)
     head_sql: list | None = None
     dialect: Any = SQLITE     # the SQL printed: store/dialect.py
     # position -> (column, positions bounding it): a pushed ``X - Y =< C`` gives the row of
@@ -238,6 +245,8 @@ class AltSQL:
             sql = self._push(goal)
             if sql is None:
                 self.residual.append(goal)
+            elif sql is QUIET:
+                self.quiet.append(goal)
             else:
                 self.pushed.append(goal)
                 self.conds.append(sql)
@@ -251,7 +260,7 @@ class AltSQL:
         # the variables whose values the Python side needs (residual goals, head)
         needed = []
         seen = set()
-        for t in list(self.residual) + list(self.head_args):
+        for t in list(self.quiet) + list(self.residual) + list(self.head_args):
             for v in term_vars(t):
                 if id(v) in self.refs and id(v) not in seen:
                     seen.add(id(v))
@@ -304,8 +313,9 @@ class AltSQL:
             return f"({self.dialect.key_equal(a.sql, b.sql)} AND {typeof(a.sql)} = {typeof(b.sql)}" + \
                 (f" AND {sign})" if sign else ")")
         d, t = (a, b) if a.kind == "data" else (b, a)
-        # times match by value (a time 5.0 and a data argument 5 are the same instant)
-        return f"({self.dialect.number(d.sql)} = {t.sql} AND {typeof(d.sql)} {_NUMERIC})"
+        # times match by value (a time 5.0 and a data argument 5 are the same instant),
+        # exactly: 2**53 + 1 is no time (the query printers' time_equal)
+        return self.dialect.time_equal(d.sql, t.sql)
 
     def _bind(self, term: Any, ref: Ref, refs: dict, out: list) -> None:
         """Constrain the column ``ref`` by the pattern term at that place."""
@@ -396,9 +406,14 @@ class AltSQL:
             return None if ref is None else (ref.sql, ref.kind)
         if type(t) in (int, float) and t == t:
             try:
-                encode(t)
+                stored = encode(t)
             except Unencodable:
                 return None
+            if type(t) is int and not -_INT64 <= t < _INT64:
+                # an integer beyond 64 bits is no SQL number (SQLite refused the parameter:
+                # every add the rule decided failed): a stored value, which the comparison
+                # hands to slr_cep_cmp, as Prolog evaluates it
+                return self._param(self._stored(stored)), "data"
             return self._param(t), "num"
         return None
 
@@ -433,7 +448,7 @@ class AltSQL:
             if not guards:
                 return _Cond(positions, core)
             if not self.dialect.python_functions:
-                return None  # slr_cep_cmp is Python: the goal is evaluated on the Python side
+                return QUIET  # slr_cep_cmp is Python: the Python side decides it as it would
             op = self._param(str(g.name))
             return _Cond(positions, f"(CASE WHEN {' AND '.join(guards)} THEN {core} ELSE "
                                     f"slr_cep_cmp({op}, {a[0]}, {b[0]}) END)")
@@ -504,8 +519,6 @@ class AltSQL:
     def _push_arith(self, g: Struct, positions: frozenset) -> _Cond | None:
         """A comparison with an arithmetic expression on either side, in SQL where its
         operands are in the exact range (see _INT_BOUND), ``slr_cep_arith`` otherwise."""
-        if not self.dialect.python_functions:
-            return None   # no fallback for the values out of range: the Python side runs it
         leaves: list = []
         names: dict = {}
         a = self._arith(g.args[0], leaves, names)
@@ -523,6 +536,10 @@ class AltSQL:
                               f"AND {ref.sql} BETWEEN -{_REAL_BOUND!r} AND {_REAL_BOUND!r}))")
             else:
                 guards.append(f"{ref.sql} BETWEEN -{_REAL_BOUND!r} AND {_REAL_BOUND!r}")
+        if guards and not self.dialect.python_functions:
+            # no fallback for the values out of range: the Python side decides it as
+            # slr_cep_arith would
+            return QUIET
         text = self._param(format_term(Struct(g.name, (a[1], b[1]))))
         values = ", ".join(ref.sql for ref in leaves)
         fallback = f"slr_cep_arith({text}{', ' if values else ''}{values})"
@@ -673,8 +690,9 @@ class AltSQL:
 
     @property
     def pure(self) -> bool:
-        """Everything in SQL: no residual goal, head computable in SQL."""
-        return not self.residual and self.head_sql is not None
+        """Everything in SQL: no residual goal (nor comparison left to Python), head
+        computable in SQL."""
+        return not self.residual and not self.quiet and self.head_sql is not None
 
     def aliases(self, prefix: str = "") -> dict[str, str]:
         return {f"e{p}": f"{prefix}e{p}" for p in range(self.k)}

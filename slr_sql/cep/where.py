@@ -34,7 +34,8 @@ from ..builtins import BuiltinMachine
 from ..errors import SLRError, SLRTimeout
 from ..store import DatabaseError
 from ..encoding import Unencodable, orjson_reads_exactly
-from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
+from ..sql_functions import compare_terms
+from ..terms import Atom, Struct, Var, deref, format_term, is_ground, term_vars
 from ..unify import resolve
 from ..host import Host
 from ..plans import instantiate
@@ -72,12 +73,35 @@ class MustWait(Exception):
         self.reason = reason
 
 
+def compares(goal: Struct, values: dict) -> bool:
+    """Whether the comparison ``goal`` (``I0 < I1 + 1``: its inputs named ``I0``, ``I1``, ...)
+    holds for the ground terms ``values`` (input name -> term), as an event rule's statement
+    decides it on SQLite (:func:`~slr_sql.sql_functions.compare_terms`: an error is no
+    match).
+
+    >>> from slr_sql.terms import Atom
+    >>> below = Struct("<", (Var("I0"), 5))
+    >>> compares(below, {"I0": 3}), compares(below, {"I0": Atom("a")})
+    (True, False)
+    """
+    def put(t: Any) -> Any:
+        t = deref(t)
+        if type(t) is Var:
+            return values.get(t.name, t)
+        if type(t) is Struct:
+            return Struct(t.name, tuple(put(a) for a in t.args))
+        return t
+
+    return compare_terms(str(goal.name), put(goal.args[0]), put(goal.args[1]))
+
+
 class Residual:
     """The residual goals of one alternative: a conjunction whose variables bound by the
     pattern are inputs (``I0``, ``I1``, ...) and whose head variables it binds are outputs
     (``O0``, ...)."""
 
-    def __init__(self, goals: list, inputs: list[Var], outputs: list[Var]):
+    def __init__(self, goals: list, inputs: list[Var], outputs: list[Var],
+                 quiet: list = ()):
         names: dict[int, Var] = {}
         for n, v in enumerate(inputs):
             names[id(v)] = Var(f"I{n}")
@@ -97,13 +121,18 @@ class Residual:
                 return Struct(t.name, tuple(rename(a) for a in t.args))
             return t
 
-        renamed = [rename(g) for g in goals]
+        # the comparisons SQLite's statement decides (sqlgen.QUIET) on a server that calls
+        # no Python: decided first, as Prolog evaluates them, an error no match (uncounted)
+        self.quiet = [rename(g) for g in quiet]
+        renamed = [rename(g) for g in goals] or [Atom("true")]
         goal = renamed[-1]
         for g in reversed(renamed[:-1]):
             goal = Struct(",", (g, goal))
         self.goal = goal
+        self.only_quiet = not goals
         self.text = format_term(goal)
         present = {v.name for v in term_vars(goal)}
+        present.update(v.name for g in self.quiet for v in term_vars(g))
         self.inputs = [(v, f"I{n}") for n, v in enumerate(inputs) if f"I{n}" in present]
         self.outputs = [(v, f"O{n}") for n, v in enumerate(outputs)]
         self._program = None
@@ -133,6 +162,10 @@ class Residual:
         :class:`MustWait`, or SLRError for an error of G.
         ``use_sql=False``: a goal that reads no stored event runs in the interpreter (there
         is nothing for SQL to read; a statement per candidate would only cost)."""
+        if self.quiet and not all(compares(g, values) for g in self.quiet):
+            return []   # (as SQLite's statement leaves the candidate out: nothing waits)
+        if self.only_quiet:
+            return [{}]
         for key in sorted(self.reads - skip):
             if not complete(key, at):
                 raise MustWait(key, at, "the where goal's goal set")

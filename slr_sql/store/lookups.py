@@ -354,6 +354,10 @@ class EventReader:
             if event_type is None:
                 return iter(())
             positions, values = self._pushdown(event_type, bound)
+        if any(t != t for t in times):
+            # a NaN bound holds for no time (SQLite binds it as NULL): a server's float
+            # order puts NaN above every number, and `t_end <= NaN` held for every row
+            return iter(())
         by_robot = robot is not None
         if by_robot:
             values.append(robot)
@@ -527,6 +531,8 @@ class EventReader:
         """:meth:`latest_rows` with ``values`` in the stored form (lock held); the rows'
         arguments as :func:`~slr_sql.encoding.decode` reads them."""
         db = self.db
+        if t != t:   # NaN: no end is at or before it (as in _query)
+            return []
         far = self._far(positions, values)
         sql = self.sql_cache.get((event_type.table, "latest", positions, point, far))
         if sql is None:

@@ -216,15 +216,23 @@ def _exact(value: str) -> str:
     written) as the double's exact value does: its integral part exactly (a bigint), plus
     the shortest decimal of its fraction (the fraction's decimal has the fraction's sign
     and stays within (-1, 1), and the shortest decimals of doubles are in their order).
-    Beyond 2**63 (and for the infinities) the shortest decimal, exact against any integer
-    within 64 bits.
+    Beyond 2**63 a double is an integer: a bigint of its 61 to 63 leading bits (the division
+    by a power of two is exact) times that power of two, exactly (its shortest decimal is
+    not its value: 2.0**70 is 1180591620717411303424, not 1180591620717411300000). The
+    infinities as their text.
 
     >>> _exact("t0.t_end")[:60]
     'CASE WHEN abs(t0.t_end) < 9223372036854775807 THEN CAST(CAST'
     """
+    # (floor(log(2, |v|)) may be one off at a power of two: the leading part stays an
+    # integer below 2**63 either way)
+    shift = f"floor(log(2, CAST(abs({value}) AS numeric))) - 61"
     return (f"CASE WHEN abs({value}) < 9223372036854775807 "
             f"THEN CAST(CAST(trunc({value}) AS bigint) AS numeric) "
             f"+ CAST(CAST({value} - trunc({value}) AS text) AS numeric) "
+            f"WHEN abs({value}) < CAST('Infinity' AS double precision) "
+            f"THEN CAST(CAST({value} / power(CAST(2 AS double precision), {shift}) AS bigint) "
+            f"AS numeric) * power(CAST(2 AS numeric), {shift}) "
             f"ELSE CAST(CAST({value} AS text) AS numeric) END")
 
 
@@ -281,7 +289,14 @@ class PostgresQueryPrinter:
         return f"{a} = ({b})::text"
 
     def time_equal(self, value: str, time: str) -> str:
-        return f"(slr_number({value}) = {time} AND slr_typeof({value}) IN ('integer', 'real'))"
+        # an integer meets the double as a NUMERIC, by their exact values: slr_number
+        # rounds it to a double, and 2**53 + 1 would be the time 2.0**53 (SQLite compares
+        # an integer with a double exactly). The rounded equality stays first (an index
+        # over the time serves it), and so does the type test (sqlcompile.TIME_ARG finds
+        # an argument from Python matched with a time by it)
+        integer = f"CAST(CASE WHEN slr_typeof({value}) = 'integer' THEN {value} END AS numeric)"
+        return (f"(slr_number({value}) = {time} AND slr_typeof({value}) IN ('integer', 'real') "
+                f"AND (slr_typeof({value}) = 'real' OR {integer} = {_exact(time)}))")
 
     zero_signs_in_sql = True   # a stored value's text carries the sign ('-0.0' is not '0.0')
 
