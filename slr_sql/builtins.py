@@ -2942,7 +2942,7 @@ def _format_char(arg: Any) -> str:
     'a'
     """
     arg = deref(arg)
-    if type(arg) is not int or arg < 0:
+    if type(arg) is not int or arg < 0 or arg > 0x7FFFFFFF:   # (no C int: no code either)
         raise _format_argument_type("c", arg)
     return _char(arg)
 

@@ -813,6 +813,7 @@ GOALS = [
     'char_type(2147483647, alpha)', 'char_type(2147483648, alpha)', 'code_type(9007199254740993, T)',
     'char_type(X, to_lower(9007199254740993))', 'char_code(X, 2147483648)', 'char_code(X, -2147483649)',
     'char_code(X, 2147483647)',
+    'format(atom(A), "~c", [2147483647])', 'format(atom(A), "~c", [2147483648])',
     'code_type(X, to_lower(-1))',
     'char_type(97, alpha)',
     'char_type("a", alpha)',
