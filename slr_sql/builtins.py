@@ -1384,7 +1384,8 @@ def _code_of(t: Any) -> Any:
             return x
         raise type_error("character", t)
     if tt is int:
-        if t < -1:
+        # (SWI-Prolog: a code beyond Unicode is no character, one beyond a C int no code)
+        if t < -1 or t > 0x7FFFFFFF:
             raise type_error("character", t)
         if t > 0x10FFFF:
             raise _err_domain("character", t)
@@ -1600,6 +1601,8 @@ def _char_code(m, a):
         raise instantiation_error()
     if type(c) is not int:
         raise type_error("integer", c)
+    if not -0x80000000 <= c <= 0x7FFFFFFF:   # SWI-Prolog reads the code as a C int first
+        raise iso_error(Struct("representation_error", (Atom("int"),)))
     if not 0 <= c <= 0x10FFFF or 0xD800 <= c <= 0xDFFF:  # surrogates too, as SWI-Prolog
         raise type_error("character_code", c)
     return m.unify(x, Atom(chr(c)))
@@ -2939,7 +2942,7 @@ def _format_char(arg: Any) -> str:
     'a'
     """
     arg = deref(arg)
-    if type(arg) is not int or arg < 0:
+    if type(arg) is not int or arg < 0 or arg > 0x7FFFFFFF:   # (no C int: no code either)
         raise _format_argument_type("c", arg)
     return _char(arg)
 

@@ -809,6 +809,11 @@ GOALS = [
     "char_type(a, to_lower([0'a]))", "code_type([0'a], to_upper(U))", 'char_type([x, y], alpha)',
     'char_type([a|_], alpha)', 'char_type([-1], end_of_file)', 'char_type([[]], alpha)',
     'char_type([1114112], alpha)', 'char_type(["a"], alpha)',
+    # a code beyond a C int: no character (type error), no code (representation_error(int))
+    'char_type(2147483647, alpha)', 'char_type(2147483648, alpha)', 'code_type(9007199254740993, T)',
+    'char_type(X, to_lower(9007199254740993))', 'char_code(X, 2147483648)', 'char_code(X, -2147483649)',
+    'char_code(X, 2147483647)',
+    'format(atom(A), "~c", [2147483647])', 'format(atom(A), "~c", [2147483648])',
     'code_type(X, to_lower(-1))',
     'char_type(97, alpha)',
     'char_type("a", alpha)',
