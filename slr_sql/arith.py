@@ -135,20 +135,39 @@ def _finite(x: float) -> float:
     return x
 
 
-def _float_args(f, promote: bool = True):
+def _float_args(f, promote: bool = True, arity: int = 1):
     """A float function of SWI-Prolog's: each float operand is checked (left first) before
     it is applied (sin(inf) is float_overflow, not undefined; exp(-inf) too), and with
     ``promote`` each integer operand is made a float first, as SWI-Prolog does, so one
     beyond the floats overflows (log(2**1100), sqrt(-(2**1100)): Python's math.log would
-    take the integer as it is)."""
-    def g(*args):
-        for a in args:
-            if type(a) is float:
+    take the integer as it is). One wrapper per arity, without a loop: these are called for
+    every sqrt, sin, atan2 the interpreter and compiled statements evaluate."""
+    if arity == 1:
+        def g(a):
+            ta = type(a)
+            if ta is float:
+                if a - a != 0.0:
+                    _finite(a)
+            elif promote and ta is int:
+                a = float(a)   # OverflowError: float_overflow
+            return f(a)
+        return g
+
+    def g2(a, b):
+        ta = type(a)
+        if ta is float:
+            if a - a != 0.0:
                 _finite(a)
-            elif promote and type(a) is int:
-                float(a)   # OverflowError: float_overflow
-        return f(*(float(a) if promote and type(a) is int else a for a in args))
-    return g
+        elif promote and ta is int:
+            a = float(a)       # (the left operand's overflow first)
+        tb = type(b)
+        if tb is float:
+            if b - b != 0.0:
+                _finite(b)
+        elif promote and tb is int:
+            b = float(b)
+        return f(a, b)
+    return g2
 
 
 def _div(a, b):
@@ -411,8 +430,8 @@ BINARY = {
     "max": _minmax(lambda a, b: a > b),
     "**": _pow_star,
     "^": _pow_caret,
-    "atan2": _float_args(math.atan2),
-    "atan": _float_args(math.atan2),
+    "atan2": _float_args(math.atan2, arity=2),
+    "atan": _float_args(math.atan2, arity=2),
     "copysign": _copysign,
     ">>": _shift_r,
     "<<": _shift_l,
@@ -421,7 +440,7 @@ BINARY = {
     "xor": lambda a, b: _int_required(a) ^ _int_required(b),
     "gcd": lambda a, b: math.gcd(_int_required(a), _int_required(b)),
     "getbit": _getbit,
-    "nexttoward": _float_args(math.nextafter),
+    "nexttoward": _float_args(math.nextafter, arity=2),
 }
 
 UNARY = {
