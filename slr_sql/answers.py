@@ -72,23 +72,27 @@ class AnswerVariables:
     (Var('Y'), True, True)
     """
 
-    __slots__ = ("named", "frame", "given")
+    __slots__ = ("named", "frame", "given", "taken")
 
     def __init__(self, named: list, frame: list):
         self.named = named
         self.frame = frame
         self.given: dict[int, Var] | None = None
+        self.taken: frozenset[str] = frozenset()
 
     def __call__(self, var: Var) -> Var:
         given = self.given
         if given is None:
             given = self.given = {key: Var(name) for key, name
                                   in query_variable_names(self.named, self.frame).items()}
+            self.taken = frozenset(name for name, _ in self.named if name.startswith("_G"))
         new = given.get(id(var))
         if new is None:
             new = Var()
-            while any(new.name == name for name, _ in self.named):   # (a query's _G2000)
-                new = Var()
+            taken = self.taken
+            if taken:
+                while new.name in taken:   # (a query's own _G2000)
+                    new = Var()
             given[id(var)] = new
         return new
 

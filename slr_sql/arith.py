@@ -135,15 +135,39 @@ def _finite(x: float) -> float:
     return x
 
 
-def _float_args(f):
+def _float_args(f, promote: bool = True, arity: int = 1):
     """A float function of SWI-Prolog's: each float operand is checked (left first) before
-    it is applied (sin(inf) is float_overflow, not undefined; exp(-inf) too)."""
-    def g(*args):
-        for a in args:
-            if type(a) is float:
+    it is applied (sin(inf) is float_overflow, not undefined; exp(-inf) too), and with
+    ``promote`` each integer operand is made a float first, as SWI-Prolog does, so one
+    beyond the floats overflows (log(2**1100), sqrt(-(2**1100)): Python's math.log would
+    take the integer as it is). One wrapper per arity, without a loop: these are called for
+    every sqrt, sin, atan2 the interpreter and compiled statements evaluate."""
+    if arity == 1:
+        def g(a):
+            ta = type(a)
+            if ta is float:
+                if a - a != 0.0:
+                    _finite(a)
+            elif promote and ta is int:
+                a = float(a)   # OverflowError: float_overflow
+            return f(a)
+        return g
+
+    def g2(a, b):
+        ta = type(a)
+        if ta is float:
+            if a - a != 0.0:
                 _finite(a)
-        return f(*args)
-    return g
+        elif promote and ta is int:
+            a = float(a)       # (the left operand's overflow first)
+        tb = type(b)
+        if tb is float:
+            if b - b != 0.0:
+                _finite(b)
+        elif promote and tb is int:
+            b = float(b)
+        return f(a, b)
+    return g2
 
 
 def _div(a, b):
@@ -152,7 +176,10 @@ def _div(a, b):
             raise evaluation_error("zero_divisor")
         if a % b == 0:
             return a // b
-        return a / b
+        # as SWI-Prolog (prefer_rationals=false): each integer made a float, then divided;
+        # not the exact quotient rounded, which differs beyond 2**53 (-1 / 9007199254740993),
+        # and an integer beyond the floats overflows (3 / 10**400)
+        return float(a) / float(b)
     if type(b) is float and b - b != 0.0:
         if b == b:
             # over an infinity (SWI-Prolog): an integer is the integer 0, a zero takes the
@@ -162,10 +189,14 @@ def _div(a, b):
             return math.copysign(0.0, b) if a == 0 else a / b
         if type(a) is float:
             _finite(a)   # inf / nan: the infinity's overflow first
+        else:
+            float(a)     # an integer beyond the floats: its overflow first (OverflowError)
         raise evaluation_error("undefined")
     if b == 0:
         if type(a) is float:
             _finite(a)
+        else:
+            float(a)     # (2**1100) / 0.0: the integer's overflow first, as SWI-Prolog
         # a zero over zero is no number (SWI-Prolog: undefined), anything else over zero
         # a division by zero
         raise evaluation_error("undefined" if a == 0 else "zero_divisor")
@@ -225,14 +256,14 @@ def _pow_float(a, b):
         if b < 0:
             raise evaluation_error("zero_divisor")
         return 0
-    if type(a) is float:
-        _finite(a)
-    if type(b) is float:
-        _finite(b)
-    if a < 0 and b != int(b):
+    # each operand checked, an integer made a float (beyond the floats: float_overflow,
+    # before a negative base's fraction is looked at), left first
+    fa = _finite(a) if type(a) is float else float(a)
+    fb = _finite(b) if type(b) is float else float(b)
+    if fa < 0 and fb != int(fb):
         raise evaluation_error("undefined")   # C's pow: a negative number to a fraction
     try:
-        return float(a) ** float(b)
+        return fa ** fb
     except ZeroDivisionError:
         raise evaluation_error("zero_divisor")
 
@@ -316,10 +347,12 @@ def _minmax(pick_first):
 
 
 def _copysign(a, b):
-    # SWI-Prolog: an integer magnitude stays an integer (copysign(1, -0.0) is -1)
+    # SWI-Prolog: an integer magnitude stays an integer (copysign(1, -0.0) is -1), and an
+    # integer sign is only its sign (no float of it: copysign(1, -(2**1100)) is -1)
+    negative = b < 0 if type(b) is int else math.copysign(1.0, b) < 0
     if type(a) is int:
-        return -abs(a) if math.copysign(1.0, b) < 0 else abs(a)
-    return math.copysign(a, b)
+        return -abs(a) if negative else abs(a)
+    return math.copysign(a, -1.0 if negative else 1.0)
 
 
 def _fractional_part(a):
@@ -370,8 +403,12 @@ def _natural(a):
 
 def _getbit(a, b):
     _int_required(a), _int_required(b)    # (both types first, as SWI-Prolog)
-    a = _natural(a)
-    return (a >> _natural(b)) & 1
+    # then, as SWI-Prolog, the index's sign, and an index beyond 64 bits is bit 0 of any
+    # value (getbit(-2, 2**63) is 0); only then the value's sign
+    b = _natural(b)
+    if b >= 1 << 63:
+        return 0
+    return (_natural(a) >> b) & 1
 
 
 def _atanh(a):
@@ -393,8 +430,8 @@ BINARY = {
     "max": _minmax(lambda a, b: a > b),
     "**": _pow_star,
     "^": _pow_caret,
-    "atan2": _float_args(math.atan2),
-    "atan": _float_args(math.atan2),
+    "atan2": _float_args(math.atan2, arity=2),
+    "atan": _float_args(math.atan2, arity=2),
     "copysign": _copysign,
     ">>": _shift_r,
     "<<": _shift_l,
@@ -403,7 +440,7 @@ BINARY = {
     "xor": lambda a, b: _int_required(a) ^ _int_required(b),
     "gcd": lambda a, b: math.gcd(_int_required(a), _int_required(b)),
     "getbit": _getbit,
-    "nexttoward": _float_args(math.nextafter),
+    "nexttoward": _float_args(math.nextafter, arity=2),
 }
 
 UNARY = {
@@ -433,7 +470,7 @@ UNARY = {
     "integer": _round,
     "float": _float_args(float),
     "float_integer_part": _float_args(
-        lambda a: a if type(a) is int else math.copysign(float(math.trunc(a)), a)),
+        lambda a: a if type(a) is int else math.copysign(float(math.trunc(a)), a), promote=False),
     "float_fractional_part": _fractional_part,
     "\\": lambda a: ~_int_required(a),
     "msb": _msb,

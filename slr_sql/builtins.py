@@ -1369,14 +1369,23 @@ _CHARS_OF_TYPE: dict[tuple[str, int], Any] = {
 
 def _code_of(t: Any) -> Any:
     """The code of a character argument: a one-character atom or string, or a code;
-    ``end_of_file`` (or -1) is -1."""
+    ``end_of_file`` (or -1) is -1. A text of one character is one too, as SWI-Prolog reads
+    it: a list of one character or one code (``[a]``, ``[0'a]``)."""
     tt = type(t)
     if tt is Atom and t == "end_of_file":
         return -1
     if (tt is Atom or tt is String) and len(t) == 1 and t != "[]":
         return ord(t)
+    if tt is Struct and t.name == "." and len(t.args) == 2 and _is_nil(deref(t.args[1])):
+        x = deref(t.args[0])
+        if type(x) is Atom and len(x) == 1 and x != "[]":
+            return ord(x)
+        if type(x) is int and 0 <= x <= 0x10FFFF:
+            return x
+        raise type_error("character", t)
     if tt is int:
-        if t < -1:
+        # (SWI-Prolog: a code beyond Unicode is no character, one beyond a C int no code)
+        if t < -1 or t > 0x7FFFFFFF:
             raise type_error("character", t)
         if t > 0x10FFFF:
             raise _err_domain("character", t)
@@ -1592,6 +1601,8 @@ def _char_code(m, a):
         raise instantiation_error()
     if type(c) is not int:
         raise type_error("integer", c)
+    if not -0x80000000 <= c <= 0x7FFFFFFF:   # SWI-Prolog reads the code as a C int first
+        raise iso_error(Struct("representation_error", (Atom("int"),)))
     if not 0 <= c <= 0x10FFFF or 0xD800 <= c <= 0xDFFF:  # surrogates too, as SWI-Prolog
         raise type_error("character_code", c)
     return m.unify(x, Atom(chr(c)))
@@ -2931,7 +2942,7 @@ def _format_char(arg: Any) -> str:
     'a'
     """
     arg = deref(arg)
-    if type(arg) is not int or arg < 0:
+    if type(arg) is not int or arg < 0 or arg > 0x7FFFFFFF:   # (no C int: no code either)
         raise _format_argument_type("c", arg)
     return _char(arg)
 
@@ -3148,6 +3159,14 @@ def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
     it comes, so its error comes before any a later solution of the goal would throw."""
     kind = spec.name
     best: list = []
+    # the library's clause head is aggregate_all(max(X, W), Goal, max(Max, Witness)): the
+    # result is max(Max, Witness) before the goal runs (a goal sharing it sees that); a
+    # result that is none goes to the library's general clause, which evaluates each
+    # solution's X (X1 is X) and then fails
+    result = Struct(kind, (Var("_Max"), Var("_Witness")))
+    if not m.unify(out, result):
+        return m.push_collect(spec.args[0], goal, lambda m, r, nxt: False, nxt,
+                              _raising_in(evaluate, _pi("is", 2)), caller=_AGGREGATE_ALL)
 
     def each(found) -> None:
         found = deref(found)
@@ -3166,7 +3185,7 @@ def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
     def finish(m, results, nxt):
         if not best:
             return False
-        return nxt if m.unify(out, Struct(kind, (best[0].args[0], best[0].args[1]))) else False
+        return nxt if m.unify(result, Struct(kind, (best[0].args[0], best[0].args[1]))) else False
 
     return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt, each,
                           caller=_AGGREGATE_ALL)

@@ -405,7 +405,10 @@ def _json_args(args: list) -> list:
     except RecursionError:
         raise BadLine("bad argument: nested too deeply") from None
     except (ValueError, TypeError) as exc:
-        raise BadLine(f"bad argument: {exc}") from None
+        # (Python's advice for an integer of more than 4,300 digits names
+        # sys.set_int_max_str_digits: said in the user's words, as kb.add says it)
+        from .plans import python_words
+        raise BadLine(f"bad argument: {python_words(exc)}") from None
     return items
 
 
@@ -2375,6 +2378,8 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
                 try:
                     answer = sub.get(timeout=0.2)
                 except slr_sql.SLRTimeout:
+                    if sub.closed:   # its end, not a wait: a where condition out of its limit
+                        raise
                     continue
                 if answer is None:       # until reached
                     break

@@ -118,3 +118,18 @@ def test_a_malformed_postgresql_url_is_said_in_words(url):
     assert done.returncode == 1
     assert done.stderr.startswith("error: ") and "URL" in done.stderr
     assert "ValueError" not in done.stderr and "bug" not in done.stderr
+
+
+def test_an_ingested_integer_beyond_pythons_digits_is_said_in_words(tmp_path):
+    """A JSON line's {"$int": ...} of 5,000 digits: the bad line said Python's advice to
+    Python programmers ("use sys.set_int_max_str_digits() to increase the limit"); it now
+    says what `slr add` says of the same integer. The other lines are still added."""
+    lines = tmp_path / "events.jsonl"
+    lines.write_text('{"name": "big", "args": [{"$int": "' + "9" * 5000 + '"}], "time": 1}\n'
+                     '{"name": "big", "args": [7], "time": 2}\n')
+    done = slr("ingest", str(tmp_path / "robot.db"), str(lines))
+    assert done.returncode == 1, done.stderr
+    assert f"{lines}:1: bad argument: an integer too long (5000 digits): at most 4300 " \
+           f"digits are read" in done.stderr, done.stderr
+    assert "sys.set_int_max_str_digits" not in done.stderr
+    assert "ingested 1 event, 1 bad line" in done.stdout + done.stderr

@@ -31,7 +31,8 @@ ROOT = Path(__file__).resolve().parent.parent
 # SQLite only: PostgreSQL runs it in the interpreter)
 PROGRAM = (f"slow :- {SLOW_BODY.format(started='')}. "
            "counted(N) :- aggregate_all(count, (p(_)^_, p(_)^_, p(_)^_), N). "
-           "differing :- p(X)^_, p(Y)^_, p(Z)^_, X \\== Y, Y \\== Z, X == Z, X == -1.")
+           "differing :- p(X)^_, p(Y)^_, p(Z)^_, X \\== Y, Y \\== Z, X == Z, X == -1. "
+           "summed(S) :- aggregate_all(sum(T), (p(_)^T, p(_)^_, p(_)^_), S).")
 
 # The program: asks GOAL the way HOW says, reports how the ask ended and how long it took,
 # then asks again and counts the events
@@ -127,6 +128,17 @@ def test_ctrl_c_met_in_a_function_of_several_arguments_raises_keyboard_interrupt
     runs such a goal in the interpreter. Kept by the C speedups' signal_safe (built wherever
     a C compiler is: tests/test_speedups.py), used even in a run without them."""
     _interrupted_program(str(tmp_path / "robot.db"), "differing", how, SLR_SQL_NO_SPEEDUPS="")
+
+
+@pytest.mark.parametrize("speedups", ["", "1"], ids=["with the C speedups", "without"])
+def test_ctrl_c_met_in_an_aggregates_step_raises_keyboard_interrupt(tmp_path, speedups):
+    """SQLite: a statement whose one Python call per row is an aggregate's step (slr_sum's),
+    where Python then runs the signal's handler; sqlite3 cleared its KeyboardInterrupt there
+    ("'step' method raised error"), and the goal went on in the interpreter until its end.
+    Kept by the C speedups' signal_safe around the aggregate's calls, and without them by
+    the step's own wrapper (the statement's progress handler then ends it)."""
+    _interrupted_program(str(tmp_path / "robot.db"), "summed(S)", "query",
+                         SLR_SQL_NO_SPEEDUPS=speedups)
 
 
 @pytest.mark.parametrize("goal", ["slow", "counted(N)"])

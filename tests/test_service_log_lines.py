@@ -25,3 +25,21 @@ def test_an_event_name_with_a_line_break_stays_on_its_warnings_line(backend, tmp
     assert "'zz\\nINFO:" in log, log          # the warning came, with the name escaped
     assert not any(line.startswith(FORGED) for line in log.splitlines()), log
     assert "\x00" not in log, "a NUL of the client's in the log"
+
+
+def test_warnings_a_client_causes_are_bounded_lines(tmp_path):
+    """Each event type a client adds with old times makes a learned-delay warning that names
+    the type: printed whole, 30 types of 2,000-character names made 30 lines of 6,000
+    characters. They are lines of the service's logger now, as the other lines a client
+    causes: cut after 200 characters of text, at most 20 of the kind a minute."""
+    log_path = tmp_path / "serve.log"
+    with ServiceProcess(tmp_path / "robot.db", log=log_path) as server:
+        events = [{"name": f"t{i}_" + "x" * 2000, "args": ["a"], "start": 2.0}
+                  for i in range(30)]
+        answer = HTTP.post(server.url + "/add_many", json={"events": events}, timeout=60)
+        assert answer.status_code == 200 and answer.json()["accepted"] == 30, answer.text
+    warned = [line for line in log_path.read_text().splitlines()
+              if line.startswith("warning: t")]
+    assert 1 <= len(warned) <= 20, warned
+    assert all(len(line) < 300 for line in warned), max(map(len, warned))
+    assert "more characters)" in warned[0]

@@ -143,12 +143,31 @@ def test_dangerous_read_only_statements_are_refused_in_words(kb, statement, word
 def test_a_result_of_many_large_rows_is_refused_in_words(kb):
     """Each value is within the limit, their sum is not: 140 rows of 1 MB."""
     with pytest.raises(SLRError, match=r"^sql: the result of a read-only statement is larger "
-                                       r"than 128 MiB of text and blobs: ask for fewer rows"):
+                                       r"than 128 MiB of text and blobs \(each value counted "
+                                       r"as 16 bytes besides its text\): ask for fewer rows"):
         kb.sql("WITH RECURSIVE c(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM c WHERE i < 140) "
                "SELECT zeroblob(1000000) FROM c")
     rows = kb.sql("WITH RECURSIVE c(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM c "
                   "WHERE i < 100) SELECT zeroblob(1000000) FROM c")[1]
     assert len(rows) == 100   # 100 MB: within the bound
+    unchanged(kb)
+
+
+def test_a_result_of_many_values_without_text_is_refused_in_words(kb, monkeypatch):
+    """Numbers and NULLs hold no text, but each costs memory: 2,000 columns of NULL over
+    20,000 rows took a server answering /sql 1.5 GB, within a bound that counted text
+    alone. Here the bound is 1 MiB, so that 100 columns over 1,000 rows pass it."""
+    from slr_sql.store import connection
+    monkeypatch.setattr(connection, "READ_ONLY_RESULT_BYTES", 1 << 20)
+    nulls = ", ".join(["NULL"] * 100)
+    many = "WITH RECURSIVE c(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM c WHERE i < 1000) "
+    with pytest.raises(SLRError, match=r"^sql: the result of a read-only statement is larger "
+                                       r"than 1 MiB .*ask for fewer rows"):
+        kb.sql(many + f"SELECT {nulls} FROM c")
+    with pytest.raises(SLRError, match=r"larger than 1 MiB"):
+        kb.sql(many + f"SELECT {', '.join(['i'] * 100)} FROM c")
+    rows = kb.sql(many + f"SELECT {', '.join(['i'] * 50)} FROM c")[1]
+    assert len(rows) == 1000 and rows[-1] == (1000,) * 50   # 800,000 bytes counted
     unchanged(kb)
 
 

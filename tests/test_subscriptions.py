@@ -265,6 +265,26 @@ def test_a_failing_condition_ends_the_subscription_with_its_error(kb):
     assert sub.closed
 
 
+@pytest.mark.parametrize("condition", ["repeat, fail", "between(1, inf, _), fail"])
+def test_an_endless_condition_ends_its_subscription_not_every_delivery(
+        kb, monkeypatch, condition):
+    """A condition runs on the delivery thread all subscriptions share: one that never ends
+    ran there for ever, and no subscription of the knowledge base (on a server, no client's)
+    got another answer. It now ends its own subscription with an SLRTimeout at its budget."""
+    monkeypatch.setattr(subscriptions.matching, "WHERE_MAX_STEPS", 20_000)
+    endless = kb.subscribe("hostile(X)^T", where=condition, since=0)
+    other = kb.subscribe("ok(X)^T", since=0)
+    kb.add("hostile(1)^1")
+    kb.add("ok(1)^2")
+    assert xs(take(other, 1)) == [1]
+    with pytest.raises(slr_sql.SLRTimeout, match=r"^the subscription's where condition did "
+                                                 r"not end within its limit \(.*20000"):
+        endless.get(timeout=DEADLINE)
+    assert endless.closed
+    kb.add("ok(2)^3")
+    assert xs(take(other, 1)) == [2]
+
+
 def test_times_match_by_value_and_point_patterns_bind_the_end(kb):
     at5 = kb.subscribe("p(X)^5", since=0)
     interval = kb.subscribe("p(X)^[S, E]", since=0)
@@ -797,6 +817,21 @@ def test_cli_errors_are_words_and_exit_1(tmp_path):
                         "p(X)^T"], capture_output=True, text=True, cwd=str(ROOT), env=_env(),
                        timeout=120)
     assert r.returncode == 1 and "no such store" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cli_ends_with_the_error_of_a_condition_out_of_its_limit(tmp_path):
+    """The subscription ends with an SLRTimeout, the class of a get() that waited 0.2 s for
+    nothing, which the command took for one and waited on for ever, saying nothing."""
+    path = str(tmp_path / "endless.db")
+    with _open(path) as kb:
+        kb.add("p(1)^1")
+    r = subprocess.run([sys.executable, "-m", "slr_sql", "subscribe", path, "p(X)^T",
+                        "--where", "repeat, fail", "--since", "0"], capture_output=True,
+                       text=True, cwd=str(ROOT), env=_env(), timeout=120)
+    assert r.returncode == 1, r.stderr
+    assert "error: the subscription's where condition did not end within its limit" in \
+        r.stderr and "Traceback" not in r.stderr
+    assert r.stdout == ""
 
 
 # -- the JSON encoding of answers ----------------------------------------------------------------

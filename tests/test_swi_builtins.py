@@ -77,6 +77,12 @@ GOALS = [
     'aggregate_all(set(X), member(X, [c, a, c, 1]), L)',
     'aggregate_all(max(X, Y), member(X-Y, [1-a, 3-b, 3-c]), M)',
     'aggregate_all(min(X, Y), member(X-Y, [1-a, 3-b, 1-c]), M)',
+    # the library's clause head makes the result max(Max, Witness) before the goal runs; a
+    # result that is none runs the general clause, which evaluates each X, then fails
+    'aggregate_all(min(C, D), D = "s", D)', 'aggregate_all(min(C, A), plus(B, A, B), B)',
+    'aggregate_all(max(X, W), (member(X-W, [1-a, 2-b]), M = max(Y, Z)), M)',
+    'aggregate_all(max(X, W), member(X-W, [1-a, 2-b]), max(1, W))',
+    'aggregate_all(max(X, W), member(X-W, [x-a]), foo)', 'aggregate_all(min(X, W), member(X-W, [1-a]), foo)',
     'aggregate_all(sum(X), member(X, [1, a]), S)',
     # a solution that is no number raises its error as it comes: before a later solution's
     # own error (SWI-Prolog evaluates each: S is S0 + X, M is max(M0, X), X > Max0)
@@ -367,6 +373,19 @@ GOALS = [
     'X is atan2(1, 0)',
     'X is atan2(0, 0)',
     'X is 7 / 2',
+    # two integers that do not divide: each made a float, then divided (beyond 2**53 that is
+    # not the exact quotient rounded), and an integer beyond the floats overflows
+    'X is -1 / 9007199254740993', 'X is 9007199254740993 / 7', 'X is 3 / 10**400',
+    'X is (10**400 + 1) / 10**399', 'X is (2**1024 - 2**970 - 1) / 3', 'X is 10**400 / 10**399',
+    # a float function makes each integer operand a float first (left first): one beyond
+    # the floats overflows, before the function looks at its sign
+    'X is log(2**1100)', 'X is log(-(2**1100))', 'X is sqrt(-(2**1100))',
+    'X is atan2(2**1100, nan)', 'X is atan2(nan, 2**1100)', 'X is float_integer_part(2**1100)',
+    # copysign takes only the sign of an integer second operand (no float of it)
+    'X is copysign(-2, 2**1100)', 'X is copysign(1.5, -(2**1100))', 'X is copysign(inf, -(2**1100))',
+    # ** and ^ with a float make an integer operand a float before a negative base's
+    # fraction is looked at
+    'X is -(2**1100) ** 0.5', 'X is -(2**1100) ^ 1.5', 'X is -(2**1100) ** nan',
     'X is 6 / 2',
     'X is -6 / 4',
     'X is cot(1)',
@@ -784,6 +803,17 @@ GOALS = [
     'char_type(X, to_lower(1))',
     'char_type(a, upper(f(x)))',
     'char_type(X, upper(f(x)))',
+    # a text of one character is a character, as SWI-Prolog reads it: [x], [0'x] (the class's
+    # argument too); any other list is the type error, naming the whole list
+    'char_type([x], T)', "code_type([0'x], alpha)", 'char_type([0], T)', 'char_type(X, upper([a]))',
+    "char_type(a, to_lower([0'a]))", "code_type([0'a], to_upper(U))", 'char_type([x, y], alpha)',
+    'char_type([a|_], alpha)', 'char_type([-1], end_of_file)', 'char_type([[]], alpha)',
+    'char_type([1114112], alpha)', 'char_type(["a"], alpha)',
+    # a code beyond a C int: no character (type error), no code (representation_error(int))
+    'char_type(2147483647, alpha)', 'char_type(2147483648, alpha)', 'code_type(9007199254740993, T)',
+    'char_type(X, to_lower(9007199254740993))', 'char_code(X, 2147483648)', 'char_code(X, -2147483649)',
+    'char_code(X, 2147483647)',
+    'format(atom(A), "~c", [2147483647])', 'format(atom(A), "~c", [2147483648])',
     'code_type(X, to_lower(-1))',
     'char_type(97, alpha)',
     'char_type("a", alpha)',
@@ -1360,6 +1390,7 @@ LEFT_ALONE = {
     'predsort(compare, [b|T], L)': "SWI-Prolog 9.0's swapped must_be (existence_error(type, [b|_])); slr_sql raises instantiation_error for a partial list, as must_be(list, L) does",
     'aggregate_all(max(X-Y), member(X-Y, [1-a, 3-b, 2-c]), M)': "max(X-W) is slr_sql's documented witness form (docs/sql.md); SWI-Prolog evaluates X-W",
     'aggregate_all(max(X, W), member(X-W, [_-a]), M)': "an unbound first X is ISO's instantiation_error (SWI-Prolog's library raises type_error(number, _) from its number/1 test)",
+    'aggregate_all(max(5), fail, M)': "SWI-Prolog 9.0's library starts max/min from State = state(X) and answers that state when the goal has no solution, so a template bound at the call (5, 1+1, X*2) is the answer (M = 5); its documentation says aggregate_all/3 fails then (the maximum of an empty set is undefined), and so does slr_sql, on both paths",
     'max_list([a], M)': "SWI-Prolog's fold starts from the first element unevaluated, so a one-element list answers that element whatever it is; slr_sql evaluates every element (type_error(evaluable, a/0), as for [1, a])",
     'aggregate_all(foo(X), member(X, [1]), N)': "SWI-Prolog reads a compound template as one of aggregation specs (foo(X) binds X to sum(_)); slr_sql takes the templates SPEC lists and refuses others with domain_error(aggregate_template, T)",
     'X is 2 ^ -1': 'ISO: type_error(float, 2) for an integer to a negative integer power (SWI-Prolog gives 0.5 unless its iso flag is set)',

@@ -9,6 +9,7 @@ import logging
 import signal
 import sys
 import threading
+import warnings
 from typing import Any
 
 import click
@@ -144,6 +145,29 @@ def throttle_stranger_logs(clock: Any = None) -> None:
             logger.addFilter(ThrottledLogFilter(clock))
 
 
+@contextlib.contextmanager
+def _warnings_as_stranger_lines():
+    """The library's warnings while the server runs, as lines of the ``slr_sql.service``
+    logger (one of :data:`STRANGER_LOGGERS`): a client causes them -- the learned-delay
+    warning of each new event type it adds with old times, the warning of each stored text
+    that is no UTF-8 a ``/sql`` reads -- so they are bounded as its other lines are: cut after
+    :data:`~slr_sql.printable.LOG_TEXT_LIMIT` characters and at most
+    :data:`~slr_sql.log_throttle.BURST` a minute. (Printed whole, a client adding events of
+    a thousand types named by 10,000 characters each wrote a thousand lines of 30,000.)"""
+    log = logging.getLogger("slr_sql.service")
+    before = warnings.showwarning
+
+    def show(message: Any, category: Any, filename: str, lineno: int, file: Any = None,
+             line: str | None = None) -> None:
+        log.warning("warning: %s", message)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = before
+
+
 def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
                *, limits: Any = None, max_connections: int | None = 1000,
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
@@ -247,7 +271,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
             print(f"slr serve: foxglove on ws://{foxglove[0]}:{view.port}", flush=True)
         # (kb.path: a PostgreSQL URL without its password, as every message shows it)
         print(f"slr serve: {kb.path or db} on {scheme}://{shown}:{bound_port}", flush=True)
-        with _stop_on_signals():
+        with _stop_on_signals(), _warnings_as_stranger_lines():
             server.run(sockets=[sock])
     except _Stop:
         pass   # uvicorn shut down gracefully and re-raised SIGINT/SIGTERM: a normal exit

@@ -16,7 +16,8 @@ without ``write``, ``slr sql``, the service's ``/sql``) runs under the stricter
 pragma that changes a setting or acts (:data:`ACTING_PRAGMAS`), and each string or blob it
 makes at most :data:`READ_ONLY_VALUE_BYTES` long (``randomblob``, ``zeroblob``, ``printf``
 widths, ``replace``/``group_concat`` growth: a memory bomb is an error, not an allocation),
-and all its rows' strings and blobs at most :data:`READ_ONLY_RESULT_BYTES`.
+and all its rows' strings and blobs, with :data:`READ_ONLY_VALUE_COST` bytes for each value,
+at most :data:`READ_ONLY_RESULT_BYTES`.
 
 The authorizer cannot carry a message: :class:`SqlGuard` remembers why it refused, and
 :class:`~slr_sql.store.connection.Database` raises that reason in words.
@@ -41,7 +42,7 @@ from .stored_text import fetch_row
 
 __all__ = ["SqlGuard", "harden_connection", "fts3_tokenizer_switch_off", "DENIED_FUNCTIONS",
            "DENIED_PRAGMAS", "READING_PRAGMAS", "ACTING_PRAGMAS", "STORE_SETTING_PRAGMAS",
-           "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES", "transaction_control_refusal",
+           "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES", "READ_ONLY_VALUE_COST", "transaction_control_refusal",
            "TEMPORARY_OBJECT_REFUSAL"]
 
 # Functions no statement on a store connection may call, with the reason given.
@@ -109,8 +110,14 @@ ACTING_PRAGMAS = frozenset({"optimize", "wal_checkpoint", "incremental_vacuum",
 
 # The longest string or blob a read-only statement may make or read (SQLITE_LIMIT_LENGTH).
 READ_ONLY_VALUE_BYTES = 64 << 20
-# The most text and blob bytes a read-only statement's rows may hold together.
+# The most bytes a read-only statement's rows may hold together: their text and blobs, and
+# READ_ONLY_VALUE_COST for each value (a number or a NULL holds no text, but its place in the
+# row's tuple and its Python object cost memory all the same: 2,000 columns of NULL over
+# 20,000 rows, no text at all, took 1.5 GB of a server answering them).
 READ_ONLY_RESULT_BYTES = 128 << 20
+# What each value of a read-only statement's rows counts beside its text: the 8 bytes of its
+# place in the row and at least as much again of its object or its JSON (a low estimate).
+READ_ONLY_VALUE_COST = 16
 
 _OK, _DENY = sqlite3.SQLITE_OK, sqlite3.SQLITE_DENY
 _FUNCTION = sqlite3.SQLITE_FUNCTION

@@ -41,8 +41,8 @@ from ..errors import CLOSED_WHILE_RUNNING, STOPPED_BY_CALLER, SLRError, SLRStore
     naming_the_store
 from ..encoding import signal_safe_loop
 from ..lockorder import ordered_lock
-from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
-    harden_connection
+from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, READ_ONLY_VALUE_COST, \
+    SqlGuard, harden_connection
 from .bounded_builtins import bounded_builtins
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
@@ -1712,6 +1712,11 @@ class Database:
                     # handler (a signal's, met outside _signal_safe's try): as a Ctrl-C's
                     raise KeyboardInterrupt from None
             raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+        else:
+            if self.escaped and outer_handler is None:
+                # (kept by a step's wrapper whose call went on, and no progress handler
+                # ended the statement: it ran to its end, and the Ctrl-C is still the caller's)
+                raise self.escaped[0] from None
         finally:
             if outer_handler is None:
                 self.escaped.clear()
@@ -1749,7 +1754,8 @@ def _signal_safe(check: Callable[[], int], db: Database) -> Callable[[], int]:
             try:
                 while True:
                     yield answer
-                    answer = check()
+                    # (kept by a function's or a step's wrapper whose call went on: end now)
+                    answer = 1 if db.escaped else check()
                     if answer:
                         db.ended_by_handler = True
             except GeneratorExit:
@@ -1806,6 +1812,45 @@ def _signal_safe_function(fn: Callable[[Any], Any], db: Database) -> Callable[[A
                 if not db.escaped:
                     db.escaped.append(exc)
                 result = _NO_VALUE
+
+    call = calls()
+    next(call)
+    return call.send
+
+
+def _signal_safe_step(step: Callable[[Any], Any], db: Database) -> Callable[[Any], Any]:
+    """An aggregate's ``step`` of one argument, as :func:`_signal_safe_function` wraps a
+    function, for a run without the C speedups: what a signal handler raises as it is called
+    is kept in ``db.escaped`` and the call returns (the statement's progress handler then
+    ends the statement, :func:`_signal_safe`); what ``step`` raises of its own fails the
+    call, as it would unwrapped.
+
+    >>> db = Database(None)
+    >>> def step(x: int) -> None:
+    ...     if x == 0:
+    ...         raise ValueError("zero")
+    ...     if x == 3:
+    ...         raise KeyboardInterrupt   # (as a signal's handler would, inside step)
+    >>> safe_step = _signal_safe_step(step, db)
+    >>> safe_step(1), safe_step(3), db.escaped
+    (None, None, [KeyboardInterrupt()])
+    >>> safe_step(0)
+    Traceback (most recent call last):
+    ...
+    ValueError: zero
+    """
+    def calls() -> Generator[None, Any, None]:
+        while True:
+            try:
+                while True:
+                    step((yield))
+            except GeneratorExit:
+                return
+            except Exception:   # step's own: the call fails (and the statement with it)
+                raise
+            except BaseException as exc:   # noqa: BLE001 - kept, raised once it ended
+                if not db.escaped:
+                    db.escaped.append(exc)
 
     call = calls()
     next(call)
@@ -1938,7 +1983,8 @@ def register_functions(conn: sqlite3.Connection, functions: SqlFunctions,
     handler raises as it is called in ``db.escaped`` (Python runs a Ctrl-C's handler in the
     first Python code that runs, most often a function called row by row, where sqlite3
     would clear it): wrapped by the C speedups' ``signal_safe`` when built, else the
-    functions of one argument only (:func:`_signal_safe_function`); aggregates are not.
+    functions and the aggregates' steps of one argument only (:func:`_signal_safe_function`;
+    a step's call goes on, and the statement's progress handler ends it).
 
     >>> from slr_sql.store.functions import Native, SqlFunction
     >>> twice = SqlFunction("twice", 1, lambda x: 2 * x, on_postgres=Native.INTERPRETER_ONLY)
@@ -1955,13 +2001,58 @@ def register_functions(conn: sqlite3.Connection, functions: SqlFunctions,
                 fn = _signal_safe_function(fn, db)
         conn.create_function(f.name, f.arity, fn, deterministic=f.deterministic)
     for a in functions.aggregates:
-        conn.create_aggregate(a.name, a.arity, a.cls)
+        cls = a.cls if db is None else _signal_safe_aggregate(a.cls, a.arity, db)
+        conn.create_aggregate(a.name, a.arity, cls)
+
+
+class _SignalSafeAggregate:
+    """One group's aggregate as SQLite calls it: the ``step`` and ``finalize`` of the
+    aggregate's own instance, wrapped to keep what a signal handler raises in them."""
+
+    __slots__ = ("step", "finalize")
+
+
+def _signal_safe_aggregate(cls: type, arity: int, db: Database) -> Callable[[], Any]:
+    """The aggregate ``cls`` as :func:`register_functions` registers it on ``db``'s
+    connection: a factory of one :class:`_SignalSafeAggregate` per group, whose calls keep a
+    signal handler's exception (a Ctrl-C's) in ``db.escaped`` -- as the functions' do: an
+    aggregate's step is called row by row, where Python most often runs the handler, and
+    sqlite3 clears what it raises there ("'step' method raised error"), so the statement
+    failed and the goal went on in the interpreter.
+
+    >>> class Total:
+    ...     def __init__(self): self.v = 0
+    ...     def step(self, x): self.v += x
+    ...     def finalize(self): return self.v
+    >>> db = Database(None); total = _signal_safe_aggregate(Total, 1, db)()
+    >>> total.step(2), total.step(3), total.finalize(), db.escaped
+    (None, None, 5, [])
+    """
+    if signal_safe_loop is not None:
+        safe = signal_safe_loop
+
+        def make() -> _SignalSafeAggregate:
+            inner = cls()
+            aggregate = _SignalSafeAggregate()
+            aggregate.step = safe(inner.step, db.escaped)
+            aggregate.finalize = safe(inner.finalize, db.escaped)
+            return aggregate
+        return safe(make, db.escaped)
+
+    def make_in_python() -> _SignalSafeAggregate:
+        inner = cls()
+        aggregate = _SignalSafeAggregate()
+        aggregate.step = _signal_safe_step(inner.step, db) if arity == 1 else inner.step
+        aggregate.finalize = inner.finalize
+        return aggregate
+    return make_in_python
 
 
 def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
-    """Every row of a read-only statement, or an SLRError once its strings and blobs add up
-    to more than :data:`READ_ONLY_RESULT_BYTES` (a statement repeating a large value over
-    many rows would otherwise fill the memory before its time limit)."""
+    """Every row of a read-only statement, or an SLRError once its strings and blobs, with
+    :data:`READ_ONLY_VALUE_COST` bytes for each value, add up to more than
+    :data:`READ_ONLY_RESULT_BYTES` (a statement repeating a large value over many rows, or
+    many values over many rows, would otherwise fill the memory before its time limit)."""
     rows: list[tuple] = []
     size = 0
     while True:
@@ -1969,14 +2060,16 @@ def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
         if not batch:
             return rows
         for row in batch:
+            size += READ_ONLY_VALUE_COST * len(row)
             for value in row:
                 if type(value) is str or type(value) is bytes:
                     size += len(value)
         if size > READ_ONLY_RESULT_BYTES:
             cursor.close()
             raise SLRError(f"sql: the result of a read-only statement is larger than "
-                           f"{READ_ONLY_RESULT_BYTES >> 20} MiB of text and blobs: ask for "
-                           f"fewer rows (LIMIT) or columns")
+                           f"{READ_ONLY_RESULT_BYTES >> 20} MiB of text and blobs (each value "
+                           f"counted as {READ_ONLY_VALUE_COST} bytes besides its text): ask "
+                           f"for fewer rows (LIMIT) or columns")
         rows.extend(batch)
 
 
