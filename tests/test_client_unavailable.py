@@ -321,6 +321,50 @@ def test_a_submit_beyond_max_pending_is_503_unavailable_with_retry_after(tmp_pat
         proc.stdout.close()
 
 
+HELD_ANSWERS_SERVER = r"""
+import sys
+from slr_sql.service.app import Limits
+from slr_sql.service.cli import run_server
+run_server(sys.argv[1], port=0, limits=Limits(max_held_answer_bytes=2000))
+"""
+
+
+def test_a_submit_beyond_the_bytes_of_answers_kept_is_503_until_one_is_deleted(tmp_path):
+    """A finished submitted query's answers are kept for its client (result_ttl, 600 s):
+    a client repeating a submission of a large answer filled the server's memory (~50 MB a
+    `length(L, 300000)`). Once the kept answers' JSON reaches max_held_answer_bytes a new
+    submission is 503 (retryable); deleting a finished one makes room."""
+    import subprocess
+    import sys
+
+    from service_helpers import HTTP, slr_env
+
+    proc = subprocess.Popen([sys.executable, "-c", HELD_ANSWERS_SERVER,
+                             str(tmp_path / "held.db")], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, env=slr_env())
+    try:
+        url = proc.stdout.readline().decode().strip().rsplit(" on ", 1)[1]
+        big = {"goal": "numlist(1, 1000, L)", "wait": DEADLINE}
+        first = HTTP.post(url + "/submit", json=big, timeout=DEADLINE)
+        assert first.status_code == 200 and first.json()["done"], first.text
+        assert len(first.json()["answers"][0]["L"]) == 1000
+        second = HTTP.post(url + "/submit", json=big, timeout=DEADLINE)
+        assert second.status_code == 503 and second.headers["Retry-After"] == "1"
+        assert second.json()["error"]["kind"] == "Unavailable"
+        assert "at most 2000" in second.json()["error"]["message"], second.text
+        # the answer kept is still there for its client, then deleted
+        handle = first.json()["handle"]
+        kept = HTTP.get(f"{url}/submit/{handle}", timeout=DEADLINE)
+        assert kept.status_code == 200 and kept.json()["answers"] == first.json()["answers"]
+        assert HTTP.delete(f"{url}/submit/{handle}", timeout=DEADLINE).status_code == 200
+        third = HTTP.post(url + "/submit", json=big, timeout=DEADLINE)
+        assert third.status_code == 200 and third.json()["done"], third.text
+    finally:
+        proc.terminate()
+        proc.wait(DEADLINE)
+        proc.stdout.close()
+
+
 def _real_sqlite_error(tmp_path, kind: str):
     """The error SQLite itself raises: a write lock another connection holds, or a file at
     its page limit."""

@@ -77,6 +77,11 @@ class Limits:
     body_timeout: float = 30.0       # seconds to receive a request body (408 beyond)
     result_ttl: float = 600.0        # seconds a finished submitted query's answer is kept
     max_pending: int = 10_000        # submitted queries kept at once (503 beyond)
+    # bytes of the answers (as JSON) of finished submitted queries kept at once, until their
+    # result_ttl or a DELETE: a new submission is 503 beyond (each kept answer holds its
+    # terms in memory, ~10x its JSON: a client repeating a submission of a large answer
+    # would otherwise fill the server's memory within result_ttl)
+    max_held_answer_bytes: int = 32 << 20
     sql_timeout: float = 30.0        # seconds a read-only SQL statement may run
     subscribe_queue: int = 1000      # answers held in memory per WebSocket subscriber
     max_running_queries: int = 4     # queries and SQL statements evaluated at once (see below)
@@ -1212,6 +1217,13 @@ async def _submit(svc: "_Service", request: Request) -> Any:
     if sum(1 for s in svc.submitted.values() if not s.pending.done()) >= svc.limits.max_pending:
         raise ServiceUnavailable(f"{svc.limits.max_pending} submitted queries are pending "
                                  f"already")
+    held = sum(s.held for s in svc.submitted.values())
+    if held >= svc.limits.max_held_answer_bytes:
+        raise ServiceUnavailable(
+            f"the answers of finished submitted queries kept for their clients take "
+            f"{held} bytes (at most {svc.limits.max_held_answer_bytes}): each is kept "
+            f"{svc.limits.result_ttl:g} s after its query finished, or until DELETE "
+            f"/submit/HANDLE")
     async with svc.query_slot(svc.limits.max_query_time):
         pending = await svc.call(svc.kb.submit, goal, at=at, id=qid, args=args,
                                  timeout=_cap(timeout, svc.limits.max_wait),
@@ -1477,8 +1489,15 @@ class _Submitted:
     pending: Any                      # the kb's PendingQuery (a concurrent.futures.Future)
     waiter: Any                       # the same as an asyncio future, for long-polls
     finished_at: float | None = None
+    held: int = 0                     # bytes of its answers as JSON, once finished
 
-    def finished(self, _future: Any) -> None:
+    def finished(self, future: Any) -> None:
+        """(On the knowledge base's thread, as the query finishes.)"""
+        if not future.cancelled() and future.exception() is None:
+            try:
+                self.held = len(dumps(encode_answers(future.result())))
+            except Exception:  # noqa: BLE001 - its poll says what is wrong with the answer
+                self.held = 0
         self.finished_at = time.monotonic()
 
 
