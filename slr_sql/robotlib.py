@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from typing import Any, Sequence
 
-from .terms import Struct
+from .terms import Struct, format_term
 
 __all__ = [
     "RobotValueError", "value_kind", "interpolate", "extrapolate", "pos_multiply", "distance",
@@ -57,6 +57,18 @@ def _is_vector(x: Any) -> bool:
     return isinstance(x, (list, tuple)) and all(_is_number(c) for c in x)
 
 
+def _shown(value: Any) -> str:
+    """A value as Prolog text in an error message (never Python's repr of a term).
+
+    >>> _shown(Struct("pose", ([1, 0], [0, 0, 0, 1])))
+    'pose([1,0],[0,0,0,1])'
+    """
+    try:
+        return format_term(value)
+    except Exception:  # noqa: BLE001 - (a value format_term cannot write): as Python has it
+        return repr(value)
+
+
 def _is_pose(x: Any) -> bool:
     return (isinstance(x, Struct) and x.name == "pose" and len(x.args) == 2
             and _is_vector(x.args[0]) and len(x.args[0]) == 3
@@ -77,25 +89,25 @@ def value_kind(v: Any) -> str:
         return "pose"
     if isinstance(v, Struct) and v.name == "pose":
         raise RobotValueError(
-            f"malformed pose {v!r}: expected pose([X,Y,Z],[QX,QY,QZ,QW]) with numbers")
-    raise RobotValueError(f"expected a number, a vector or a pose, got {v!r}")
+            f"malformed pose {_shown(v)}: expected pose([X,Y,Z],[QX,QY,QZ,QW]) with numbers")
+    raise RobotValueError(f"expected a number, a vector or a pose, got {_shown(v)}")
 
 
 def _number(x: Any, what: str) -> float:
     if not _is_number(x):
-        raise RobotValueError(f"{what} must be a number, got {x!r}")
+        raise RobotValueError(f"{what} must be a number, got {_shown(x)}")
     return x
 
 
 def _point(p: Any, what: str = "point") -> list[float]:
     if not _is_vector(p) or len(p) != 3:
-        raise RobotValueError(f"{what} must be a list of 3 numbers [X,Y,Z], got {p!r}")
+        raise RobotValueError(f"{what} must be a list of 3 numbers [X,Y,Z], got {_shown(p)}")
     return [float(c) for c in p]
 
 
 def _pose_parts(p: Any, what: str = "pose") -> tuple[list[float], tuple[float, ...]]:
     if not _is_pose(p):
-        raise RobotValueError(f"{what} must be pose([X,Y,Z],[QX,QY,QZ,QW]), got {p!r}")
+        raise RobotValueError(f"{what} must be pose([X,Y,Z],[QX,QY,QZ,QW]), got {_shown(p)}")
     return [float(c) for c in p.args[0]], quat_normalize(p.args[1])
 
 
@@ -113,7 +125,7 @@ def make_pose(translation: Sequence[float], rotation: Sequence[float]) -> Struct
 
 def _quat(q: Any, what: str = "quaternion") -> tuple[float, float, float, float]:
     if not _is_vector(q) or len(q) != 4:
-        raise RobotValueError(f"{what} must be a list of 4 numbers [QX,QY,QZ,QW], got {q!r}")
+        raise RobotValueError(f"{what} must be a list of 4 numbers [QX,QY,QZ,QW], got {_shown(q)}")
     return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
 
 
@@ -126,7 +138,7 @@ def quat_normalize(q: Sequence[float]) -> tuple[float, float, float, float]:
     x, y, z, w = _quat(q)
     n = math.sqrt(x * x + y * y + z * z + w * w)
     if not n > 0.0 or math.isinf(n):
-        raise RobotValueError(f"cannot normalize quaternion {list(q)!r}")
+        raise RobotValueError(f"cannot normalize quaternion {_shown(list(q))}")
     return (x / n, y / n, z / n, w / n)
 
 
@@ -225,7 +237,7 @@ def interpolate(t: float, v1: Any, t1: float, v2: Any, t2: float) -> Any:
     k1 = value_kind(v1)
     k2 = value_kind(v2)
     if k1 != k2:
-        raise RobotValueError(f"cannot interpolate between a {k1} ({v1!r}) and a {k2} ({v2!r})")
+        raise RobotValueError(f"cannot interpolate between a {k1} ({_shown(v1)}) and a {k2} ({_shown(v2)})")
     if k1 == "vector" and len(v1) != len(v2):
         raise RobotValueError(
             f"cannot interpolate between vectors of lengths {len(v1)} and {len(v2)}")
@@ -280,7 +292,7 @@ def pos_multiply(p: Any, transforms: Sequence[Any]) -> Any:
 def _pos_multiply_checked(p: Any, transforms: Sequence[Any]) -> Any:
     """pos_multiply through the general helpers: every value validated with a clear error."""
     if not isinstance(transforms, (list, tuple)):
-        raise RobotValueError(f"pos_multiply expects a list of pose transforms, got {transforms!r}")
+        raise RobotValueError(f"pos_multiply expects a list of pose transforms, got {_shown(transforms)}")
     parts = [_pose_parts(a, f"transform #{i + 1}") for i, a in enumerate(transforms)]
     if _is_pose(p):
         t, q = _pose_parts(p)
@@ -294,7 +306,7 @@ def _pos_multiply_checked(p: Any, transforms: Sequence[Any]) -> Any:
             x = [a + b for a, b in zip(ta, r)]
         return x
     raise RobotValueError(
-        f"pos_multiply: first element must be a point [X,Y,Z] or a pose, got {p!r}")
+        f"pos_multiply: first element must be a point [X,Y,Z] or a pose, got {_shown(p)}")
 
 
 # --------------------------------------------------------------------------- fast paths
@@ -497,7 +509,7 @@ def distance(p1: Any, p2: Any) -> float:
     k1 = value_kind(p1)
     k2 = value_kind(p2)
     if k1 != k2:
-        raise RobotValueError(f"cannot measure distance between a {k1} ({p1!r}) and a {k2} ({p2!r})")
+        raise RobotValueError(f"cannot measure distance between a {k1} ({_shown(p1)}) and a {k2} ({_shown(p2)})")
     if k1 == "number":
         return float(abs(p1 - p2))
     if k1 == "pose":

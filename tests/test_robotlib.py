@@ -13,6 +13,8 @@ from slr_sql.robotlib import (
 )
 from slr_sql.terms import Atom, Struct
 
+import slr_sql
+
 TOL = 1e-9
 S = math.sqrt(0.5)
 IDENTITY = make_pose([0, 0, 0], [0, 0, 0, 1])
@@ -379,3 +381,21 @@ def test_value_kind():
     assert value_kind(IDENTITY) == "pose"
     with pytest.raises(RobotValueError):
         value_kind(Atom("x"))
+
+
+@pytest.mark.parametrize("goal, words", [
+    ("interpolate([V, 2.5], [pose([0,0,0],[0,0,0,1]), 2], [pose([1,0],[0,0,0,1]), 4])",
+     "malformed pose pose([1,0],[0,0,0,1])"),
+    ("interpolate([V, 2.5], [pose([0,0,0],[0,0,0,1]), 2], [pose(a,[0,0,0,1]), 4])",
+     "malformed pose pose(a,[0,0,0,1])"),
+    ("interpolate([V, 2.5], [1, 2], [[1,2], 4])",
+     "cannot interpolate between a number (1) and a vector ([1,2])"),
+])
+def test_a_robot_value_error_shows_the_value_as_prolog_text(goal, words):
+    """The value in a robot library error is Prolog text, never Python's repr of a term
+    (it said Struct('pose', (Atom('a'), [0, 0, 0, 1])))."""
+    kb = slr_sql.open()
+    with pytest.raises(slr_sql.SLRError) as caught:
+        kb.query(goal)
+    assert words in str(caught.value) and "Struct(" not in str(caught.value)
+    kb.close()
