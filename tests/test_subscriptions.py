@@ -271,14 +271,14 @@ def test_an_endless_condition_ends_its_subscription_not_every_delivery(
     """A condition runs on the delivery thread all subscriptions share: one that never ends
     ran there for ever, and no subscription of the knowledge base (on a server, no client's)
     got another answer. It now ends its own subscription with an SLRTimeout at its budget."""
-    monkeypatch.setattr(subscriptions.matching, "WHERE_MAX_STEPS", 20_000)
+    monkeypatch.setattr(subscriptions.matching, "WHERE_TIMEOUT", 0.2)
     endless = kb.subscribe("hostile(X)^T", where=condition, since=0)
     other = kb.subscribe("ok(X)^T", since=0)
     kb.add("hostile(1)^1")
     kb.add("ok(1)^2")
     assert xs(take(other, 1)) == [1]
     with pytest.raises(slr_sql.SLRTimeout, match=r"^the subscription's where condition did "
-                                                 r"not end within its limit \(.*20000"):
+                                                 r"not end within its limit \(.*0\.2 s"):
         endless.get(timeout=DEADLINE)
     assert endless.closed
     kb.add("ok(2)^3")
