@@ -30,7 +30,7 @@ from typing import Any, Protocol
 
 from .query_printers import PostgresQueryPrinter, SQLiteQueryPrinter, Unprintable
 
-__all__ = ["KEY_TEXT_CHARACTERS", "POSTGRES", "SQLITE", "Dialect", "PostgresDialect",
+__all__ = ["KEY_TEXT_CHARACTERS", "block_comment_end", "POSTGRES", "SQLITE", "Dialect", "PostgresDialect",
            "SQLiteDialect", "Unprintable", "short_text"]
 
 # A stored text that reads as a number (PostgreSQL columns): integers, and Python's float
@@ -398,6 +398,24 @@ _NAMED = re.compile(r":([A-Za-z_][A-Za-z0-9_]*)")
 _DOLLAR = re.compile(r"\$(?:[A-Za-z_\x80-\uffff][A-Za-z0-9_\x80-\uffff]*)?\$")
 
 
+
+def block_comment_end(sql: str, at: int) -> int:
+    """Where the block comment that starts at ``at`` (``/*``) ends: past its ``*/``, or the
+    text's end; PostgreSQL's block comments nest.
+
+    >>> block_comment_end("/* a /* b */ c */ SELECT 1", 0)
+    17
+    """
+    depth, j, n = 1, at + 2, len(sql)
+    while j < n and depth:
+        if sql.startswith("/*", j):
+            depth, j = depth + 1, j + 2
+        elif sql.startswith("*/", j):
+            depth, j = depth - 1, j + 2
+        else:
+            j += 1
+    return j
+
 def _format_params(sql: str) -> str:
     r"""``sql`` with slr_sql's parameters (``?``, ``:name``) in psycopg's style and every
     other ``%`` doubled. What PostgreSQL reads as text is left as it is: strings (``'..'``,
@@ -435,14 +453,7 @@ def _format_params(sql: str) -> str:
             out.append(sql[i:j].replace("%", "%%"))
             i = j
         elif c == "/" and sql.startswith("/*", i):
-            depth, j = 1, i + 2   # PostgreSQL's block comments nest
-            while j < n and depth:
-                if sql.startswith("/*", j):
-                    depth, j = depth + 1, j + 2
-                elif sql.startswith("*/", j):
-                    depth, j = depth - 1, j + 2
-                else:
-                    j += 1
+            j = block_comment_end(sql, i)
             out.append(sql[i:j].replace("%", "%%"))
             i = j
         elif c == "$" and (m := _DOLLAR.match(sql, i)) is not None and not (

@@ -38,7 +38,7 @@ from .connection import ChangedMeanwhile, Database, DatabaseError, drop_commit_c
     is_postgres_url, merge_commit_callbacks, run_after_rollback, \
     password_token, run_commit_callbacks, shown_location
 from .authorizer import transaction_control_refusal
-from .dialect import POSTGRES
+from .dialect import POSTGRES, block_comment_end
 from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
 from .sqltext import bound_parameters, qualified_identifier, quote_identifier
@@ -1005,14 +1005,7 @@ def _first_word(statement: str) -> int:
             end = _LINE_END.search(statement, at)
             at = n if end is None else end.end()
         elif statement.startswith("/*", at):
-            depth, at = 1, at + 2
-            while at < n and depth:
-                if statement.startswith("/*", at):
-                    depth, at = depth + 1, at + 2
-                elif statement.startswith("*/", at):
-                    depth, at = depth - 1, at + 2
-                else:
-                    at += 1
+            at = block_comment_end(statement, at)
         else:
             break
     return at
