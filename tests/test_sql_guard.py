@@ -159,6 +159,7 @@ def test_a_result_of_many_values_without_text_is_refused_in_words(kb, monkeypatc
     alone. Here the bound is 1 MiB, so that 100 columns over 1,000 rows pass it."""
     from slr_sql.store import connection
     monkeypatch.setattr(connection, "READ_ONLY_RESULT_BYTES", 1 << 20)
+    # (the statements' column lists are built here: literals and one column name, no value)
     nulls = ", ".join(["NULL"] * 100)
     many = "WITH RECURSIVE c(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM c WHERE i < 1000) "
     with pytest.raises(SLRError, match=r"^sql: the result of a read-only statement is larger "

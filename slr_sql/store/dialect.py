@@ -398,7 +398,6 @@ _NAMED = re.compile(r":([A-Za-z_][A-Za-z0-9_]*)")
 _DOLLAR = re.compile(r"\$(?:[A-Za-z_\x80-\uffff][A-Za-z0-9_\x80-\uffff]*)?\$")
 
 
-
 def block_comment_end(sql: str, at: int) -> int:
     """Where the block comment that starts at ``at`` (``/*``) ends: past its ``*/``, or the
     text's end; PostgreSQL's block comments nest.
@@ -415,6 +414,7 @@ def block_comment_end(sql: str, at: int) -> int:
         else:
             j += 1
     return j
+
 
 def _format_params(sql: str) -> str:
     r"""``sql`` with slr_sql's parameters (``?``, ``:name``) in psycopg's style and every
